@@ -1,0 +1,57 @@
+# handradar: every target sets itself up (a .venv in the repo, created when missing).
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+
+BOOT_PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV        := .venv
+PY          := $(VENV)/bin/python
+STAMP       := $(VENV)/.installed
+JOBS        ?= 2
+ARGS        ?=
+
+.PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark clean
+
+help: ## list the targets
+	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-15s %s\n", $$1, $$2}'
+
+$(STAMP): pyproject.toml
+	@test -x $(PY) || $(BOOT_PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --upgrade --quiet pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	@touch $(STAMP)
+
+install: $(STAMP) ## create .venv and install handradar (editable) with its test tools
+
+run: $(STAMP) ## the default few-shot experiment on reference-world data, end to end
+	$(PY) train.py +experiment=few_shot_5pct $(ARGS)
+
+test: $(STAMP) ## the default test suite (fast; excludes @slow)
+	$(PY) -m pytest -n $(JOBS) -q $(ARGS)
+
+test-full: $(STAMP) ## every test, slow ones included
+	$(PY) -m pytest -n $(JOBS) -q -m "" $(ARGS)
+
+bench: $(STAMP) ## benchmarks: throughput figures and ratios (benchmarks/results.md)
+	$(PY) -m benchmarks $(ARGS)
+
+sweep: $(STAMP) ## the paper's few-shot grid over seeds (Hydra multirun, joblib launcher)
+	$(PY) train.py -m hydra/launcher=joblib +experiment=few_shot_5pct,few_shot_20pct,few_shot_50pct seed=1,2,3 $(ARGS)
+
+tables: $(STAMP) ## markdown + CSV tables (mean +/- std over seeds) from the MLflow runs
+	$(PY) -m experiments.tables $(ARGS)
+
+mlflow-ui: $(STAMP) ## the MLflow dashboard on http://127.0.0.1:5000
+	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/logs/mlflow/mlflow.db --host 127.0.0.1 --port 5000
+
+world: $(STAMP) ## write reference-world recordings to data/world_recordings
+	$(VENV)/bin/handradar-world out=data/world_recordings $(ARGS)
+
+world-gallery: $(STAMP) ## PNG grid of reference-world spectrograms per gesture and per effect
+	$(PY) -m handradar.viz.world_gallery $(ARGS)
+
+gap-benchmark: $(STAMP) ## the withheld-effect validation of the gap diagnosis
+	$(PY) diagnose.py +experiment=gap_benchmark $(ARGS)
+
+clean: ## remove caches, logs and build files (keeps .venv)
+	rm -rf .cache logs outputs multirun .pytest_cache .hypothesis build *.egg-info src/*.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

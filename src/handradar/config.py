@@ -1,0 +1,33 @@
+"""Hydra/OmegaConf glue: resolvers, the config folder, and conversion helpers."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from omegaconf import OmegaConf
+
+from handradar.provenance import REPO_ROOT
+
+VERSION_BASE = "1.3"
+
+
+def config_dir() -> Path:
+    """The ``conf/`` folder: $HANDRADAR_CONF, else the checkout this package is installed from."""
+    path = Path(os.environ.get("HANDRADAR_CONF", REPO_ROOT / "conf"))
+    if not (path / "train.yaml").is_file() and not (path / "ingest.yaml").is_file():
+        raise FileNotFoundError(f"handradar config folder not found at {path}: install the package in "
+                                "editable mode from its checkout (make install) or set HANDRADAR_CONF")
+    return path
+
+
+def experiments_dir() -> Path:
+    return config_dir().parent / "experiments"
+
+
+def register_resolvers() -> None:
+    if not OmegaConf.has_resolver("hr_root"):
+        OmegaConf.register_new_resolver("hr_root", lambda: str(REPO_ROOT))
+
+
+register_resolvers()

@@ -1,0 +1,165 @@
+"""The HDF5 dataset ``handradar.dataset/1`` (DESIGN section 7): writer, reader, validator.
+
+Datasets: ``spectrograms`` (N, 64, 32) float32 in [0, 1]; ``labels`` (N,) int64; ``skeletons``
+(N, T, 2, 21, 3) float32 radar-frame metres resampled to a common T over the spectrogram's time
+window; group ``meta`` with one (N,) array per label field. Extra datasets (not part of the
+contract, read by handradar itself): ``hand_mask`` (N, T, 2) bool, ``window_start_s`` (N,).
+File attributes: ``format``, ``config_hash``, ``code_version``, ``classes`` (JSON list),
+``radar_cfg`` (the radar.cfg text), ``chain`` (JSON), ``skeleton_rate_hz``.
+
+Files are written through :func:`handradar.atomic.atomic_path`: an interrupted write leaves
+nothing at the target path.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from handradar.atomic import atomic_path
+from handradar.errors import FormatError
+from handradar.provenance import code_version
+from handradar.radar.chain import ChainConfig
+from handradar.radar.config import RadarConfig
+
+FORMAT = "handradar.dataset/1"
+STR = h5py.string_dtype("utf-8")
+
+
+class DatasetWriter:
+    """Append examples row by row into resizable datasets of a temporary file.
+
+    Use through :func:`open_writer`, which moves the file into place only when the block ends
+    without an exception (Ctrl-C included).
+    """
+
+    def __init__(self, h5: h5py.File, n_steps: int, spec_shape: tuple[int, int]) -> None:
+        self.h5 = h5
+        self.n = 0
+        self.meta: dict[str, list] = {}
+        chunk = 64
+        h5.create_dataset("spectrograms", (0, *spec_shape), maxshape=(None, *spec_shape), dtype="f4",
+                          chunks=(chunk, *spec_shape))
+        h5.create_dataset("labels", (0,), maxshape=(None,), dtype="i8", chunks=(1024,))
+        h5.create_dataset("skeletons", (0, n_steps, 2, 21, 3), maxshape=(None, n_steps, 2, 21, 3), dtype="f4",
+                          chunks=(8, n_steps, 2, 21, 3))
+        h5.create_dataset("hand_mask", (0, n_steps, 2), maxshape=(None, n_steps, 2), dtype=bool,
+                          chunks=(chunk, n_steps, 2))
+        h5.create_dataset("window_start_s", (0,), maxshape=(None,), dtype="f8", chunks=(1024,))
+
+    def append(self, spectrogram: np.ndarray, label: int, skeleton: np.ndarray, hand_mask: np.ndarray,
+               window_start_s: float, meta: dict[str, object]) -> None:
+        i = self.n
+        for name in ("spectrograms", "labels", "skeletons", "hand_mask", "window_start_s"):
+            self.h5[name].resize(i + 1, axis=0)
+        self.h5["spectrograms"][i] = spectrogram
+        self.h5["labels"][i] = label
+        self.h5["skeletons"][i] = skeleton
+        self.h5["hand_mask"][i] = hand_mask
+        self.h5["window_start_s"][i] = window_start_s
+        if self.n and set(meta) != set(self.meta):
+            raise ValueError(f"meta fields {sorted(meta)} differ from the first row's {sorted(self.meta)}")
+        for k, v in meta.items():
+            self.meta.setdefault(k, []).append(v)
+        self.n += 1
+
+    def finish(self) -> None:
+        g = self.h5.create_group("meta")
+        for k, values in self.meta.items():
+            if all(isinstance(v, (bool, np.bool_)) for v in values):
+                g.create_dataset(k, data=np.asarray(values, dtype=bool))
+            elif all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in values):
+                g.create_dataset(k, data=np.asarray(values, dtype=np.int64))
+            elif all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in values):
+                g.create_dataset(k, data=np.asarray(values, dtype=np.float64))
+            else:
+                g.create_dataset(k, data=np.asarray([str(v) for v in values], dtype=object), dtype=STR)
+
+
+@contextlib.contextmanager
+def open_writer(path: str | Path, *, classes: Sequence[str], radar: RadarConfig, chain: ChainConfig,
+                skeleton_rate_hz: float, n_steps: int, config_hash: str,
+                extra_attrs: dict | None = None) -> Iterator[DatasetWriter]:
+    """Write a dataset atomically: nothing appears at ``path`` unless the block completes."""
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as h5:
+            h5.attrs["format"] = FORMAT
+            h5.attrs["config_hash"] = config_hash
+            h5.attrs["code_version"] = code_version()
+            h5.attrs["classes"] = json.dumps(list(classes))
+            h5.attrs["radar_cfg"] = radar.to_cfg()
+            h5.attrs["chain"] = json.dumps(asdict(chain))
+            h5.attrs["skeleton_rate_hz"] = float(skeleton_rate_hz)
+            for k, v in (extra_attrs or {}).items():
+                h5.attrs[k] = v
+            writer = DatasetWriter(h5, n_steps, (chain.stft_len, chain.n_columns))
+            yield writer
+            writer.finish()
+
+
+def read_attrs(path: str | Path) -> dict[str, object]:
+    """Validated file attributes, with ``classes``/``chain`` decoded and ``radar`` parsed."""
+    path = Path(path)
+    try:
+        h5 = h5py.File(path, "r")
+    except OSError as exc:
+        raise FormatError(path, f"not a readable HDF5 file ({exc})") from None
+    with h5:
+        attrs = dict(h5.attrs)
+        if attrs.get("format") != FORMAT:
+            raise FormatError(path, f"attribute 'format' must be {FORMAT!r}, found {attrs.get('format')!r}")
+        missing = [k for k in ("spectrograms", "labels", "skeletons", "meta") if k not in h5]
+        if missing:
+            raise FormatError(path, f"missing dataset(s) {missing}")
+        attrs["n"] = int(h5["labels"].shape[0])
+    attrs["classes"] = json.loads(attrs["classes"]) if "classes" in attrs else None
+    if "chain" in attrs:
+        c = json.loads(attrs["chain"])
+        c["gate_m"] = tuple(c["gate_m"])
+        attrs["chain"] = ChainConfig(**c)
+    if "radar_cfg" in attrs:
+        attrs["radar"] = RadarConfig.from_cfg_text(str(attrs["radar_cfg"]), f"{path}:radar_cfg")
+    return attrs
+
+
+def read_meta_group(path: str | Path) -> dict[str, np.ndarray]:
+    """The ``meta`` group as numpy arrays (strings decoded)."""
+    with h5py.File(path, "r") as h5:
+        out = {}
+        for k, ds in h5["meta"].items():
+            a = ds[()]
+            out[k] = np.asarray([s.decode() if isinstance(s, bytes) else s for s in a]) if a.dtype == object else a
+        return out
+
+
+def validate(path: str | Path) -> int:
+    """Check the contract of a dataset file; return N or raise FormatError naming the problem."""
+    path = Path(path)
+    attrs = read_attrs(path)
+    n = attrs["n"]
+    with h5py.File(path, "r") as h5:
+        spec = h5["spectrograms"]
+        if spec.ndim != 3 or spec.shape[0] != n or spec.dtype != np.float32:
+            raise FormatError(path, f"spectrograms must be (N, 64, 32) float32, found {spec.shape} {spec.dtype}")
+        for lo in range(0, n, 4096):
+            block = spec[lo:lo + 4096]
+            if not np.all(np.isfinite(block)) or block.min(initial=0) < 0 or block.max(initial=0) > 1:
+                raise FormatError(path, f"spectrograms {lo}..{lo + len(block)} have values outside [0, 1]")
+        if h5["labels"].dtype != np.int64:
+            raise FormatError(path, f"labels must be int64, found {h5['labels'].dtype}")
+        sk = h5["skeletons"]
+        if sk.ndim != 5 or sk.shape[0] != n or sk.shape[2:] != (2, 21, 3) or sk.dtype != np.float32:
+            raise FormatError(path, f"skeletons must be (N, T, 2, 21, 3) float32, found {sk.shape} {sk.dtype}")
+        for k, ds in h5["meta"].items():
+            if ds.shape != (n,):
+                raise FormatError(path, f"meta/{k} must have shape ({n},), found {ds.shape}")
+        for k in ("config_hash", "code_version"):
+            if k not in h5.attrs:
+                raise FormatError(path, f"missing attribute {k!r}")
+    return n

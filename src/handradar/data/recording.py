@@ -1,0 +1,190 @@
+"""Recording folders in the ``handradar.recording/1`` format (DESIGN section 4).
+
+A recording is a folder with ``radar.cfg``, ``adc_data.bin``, ``leap.jsonl`` and ``meta.json``.
+:func:`load_recording` validates all four and returns the radar cube, the skeleton in the radar
+frame on the radar clock, and the labels. The generator's ``truth`` object is never loaded here:
+only evaluation code may read it, through :func:`read_truth`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from handradar.atomic import atomic_write_text
+from handradar.errors import FormatError
+from handradar.hand.leap import leap_matrix, read_leap_jsonl
+from handradar.hand.skeleton import HandSequence
+from handradar.radar.config import RadarConfig
+from handradar.radar.dca1000 import read_adc
+
+FORMAT = "handradar.recording/1"
+GESTURES = (
+    "grasp", "finger_friction", "finger_wave", "circle", "slide", "finger_cross",
+    "double_hand_clap", "double_hand_drumming", "hand_merge", "double_hand_circle",
+)
+FILES = ("radar.cfg", "adc_data.bin", "leap.jsonl", "meta.json")
+META_FIELDS = ("gesture", "subject", "angle_deg", "hands", "occlusion", "repetition")
+
+
+@dataclass(frozen=True)
+class RecordingMeta:
+    """meta.json without ``truth``: labels, clock offset and calibration."""
+
+    gesture: str
+    subject: str
+    angle_deg: float
+    hands: int
+    occlusion: bool
+    repetition: int
+    radar_start_us: float
+    leap_to_radar: tuple[tuple[float, ...], ...]
+
+    @property
+    def label(self) -> int:
+        return GESTURES.index(self.gesture)
+
+    def labels(self) -> dict[str, object]:
+        """The per-recording label fields stored in the dataset's ``meta`` group."""
+        return {k: getattr(self, k) for k in META_FIELDS}
+
+    def to_json(self, truth: dict | None = None) -> dict:
+        d = {"format": FORMAT, **asdict(self)}
+        d["leap_to_radar"] = [list(r) for r in self.leap_to_radar]
+        if truth is not None:
+            d["truth"] = truth
+        return d
+
+
+def _require(path: Path, obj: dict, key: str, kinds: tuple[type, ...], what: str) -> object:
+    if key not in obj:
+        raise FormatError(path, f"missing required field '{key}' ({what})")
+    value = obj[key]
+    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+        raise FormatError(path, f"field '{key}' must be {what}, found {value!r:.60}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise FormatError(path, f"field '{key}' must be finite, found {value!r}")
+    return value
+
+
+def parse_meta(obj: object, path: str | Path = "meta.json") -> RecordingMeta:
+    path = Path(path)
+    if not isinstance(obj, dict):
+        raise FormatError(path, f"expected a JSON object, found {type(obj).__name__}")
+    fmt = obj.get("format")
+    if fmt != FORMAT:
+        raise FormatError(path, f"'format' must be {FORMAT!r}, found {fmt!r:.60}")
+    gesture = _require(path, obj, "gesture", (str,), "a gesture name")
+    if gesture not in GESTURES:
+        raise FormatError(path, f"unknown gesture {gesture!r:.60}; expected one of {', '.join(GESTURES)}")
+    subject = _require(path, obj, "subject", (str, int), "a subject id")
+    angle = _require(path, obj, "angle_deg", (int, float), "a number of degrees")
+    hands = _require(path, obj, "hands", (int,), "1 or 2")
+    if hands not in (1, 2):
+        raise FormatError(path, f"field 'hands' must be 1 or 2, found {hands!r}")
+    occlusion = _require(path, obj, "occlusion", (bool,), "true or false")
+    repetition = _require(path, obj, "repetition", (int,), "an integer")
+    start = _require(path, obj, "radar_start_us", (int, float), "microseconds on the Leap clock")
+    m = leap_matrix(_require(path, obj, "leap_to_radar", (list,), "a 4x4 row-major matrix"), path)
+    return RecordingMeta(gesture=str(gesture), subject=str(subject), angle_deg=float(angle), hands=int(hands),
+                         occlusion=bool(occlusion), repetition=int(repetition), radar_start_us=float(start),
+                         leap_to_radar=tuple(tuple(float(v) for v in row) for row in m))
+
+
+def _read_json(path: Path) -> object:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise FormatError(path, f"cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise FormatError(path, "not UTF-8 text") from None
+    except json.JSONDecodeError as exc:
+        raise FormatError(path, f"invalid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
+
+
+def read_meta(folder: str | Path) -> RecordingMeta:
+    path = Path(folder) / "meta.json"
+    return parse_meta(_read_json(path), path)
+
+
+def read_truth(folder: str | Path) -> dict | None:
+    """The generator's ``truth`` object: for evaluation code only, never for diagnosis or training."""
+    obj = _read_json(Path(folder) / "meta.json")
+    return obj.get("truth") if isinstance(obj, dict) else None
+
+
+@dataclass
+class Recording:
+    """A validated recording: radar cube, skeleton on the radar clock and labels."""
+
+    folder: Path
+    radar: RadarConfig
+    adc: np.ndarray  # (frames, chirps_per_frame, rx, samples) complex64 ADC counts
+    skeleton: HandSequence  # radar frame, t = 0 at the start of radar frame 0
+    meta: RecordingMeta
+
+    @property
+    def name(self) -> str:
+        return self.folder.name
+
+    @property
+    def n_frames(self) -> int:
+        return self.adc.shape[0]
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_frames * self.radar.frame_period_s
+
+
+def check_folder(folder: str | Path) -> Path:
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FormatError(folder, "not a recording folder (no such directory)")
+    missing = [f for f in FILES if not (folder / f).is_file()]
+    if missing:
+        raise FormatError(folder, f"missing file(s) {', '.join(missing)}; a recording holds {', '.join(FILES)}")
+    return folder
+
+
+def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
+                   allow_truncated: bool = False) -> Recording:
+    """Load and validate one recording folder.
+
+    The Leap data must cover the radar capture (first sample at most ``coverage_tolerance_s``
+    after radar frame 0 starts, last at most that long before the capture ends), and the hands
+    meta.json announces must be tracked somewhere in the capture.
+    """
+    folder = check_folder(folder)
+    meta = read_meta(folder)
+    radar = RadarConfig.from_file(folder / "radar.cfg")
+    adc = read_adc(folder / "adc_data.bin", radar, allow_truncated=allow_truncated)
+    skeleton = read_leap_jsonl(folder / "leap.jsonl", np.asarray(meta.leap_to_radar), meta.radar_start_us)
+    end = adc.shape[0] * radar.frame_period_s
+    t0, t1 = float(skeleton.times[0]), float(skeleton.times[-1])
+    if t0 > coverage_tolerance_s or t1 < end - coverage_tolerance_s:
+        raise FormatError(folder / "leap.jsonl",
+                          f"Leap data cover {t0:.3f}..{t1:.3f} s of the radar clock, but the capture spans "
+                          f"0..{end:.3f} s ({adc.shape[0]} frames of {radar.frame_period_s * 1e3:g} ms); "
+                          "check radar_start_us in meta.json")
+    inside = (skeleton.times >= 0) & (skeleton.times <= end)
+    n_tracked = int(skeleton.mask[inside].any(axis=0).sum())
+    if n_tracked < meta.hands:
+        raise FormatError(folder / "leap.jsonl", f"meta.json says {meta.hands} hand(s) but {n_tracked} "
+                                                 "are tracked during the capture")
+    return Recording(folder=folder, radar=radar, adc=adc, skeleton=skeleton, meta=meta)
+
+
+def find_recordings(root: str | Path) -> list[Path]:
+    """Recording folders under ``root`` (any folder holding a meta.json), sorted."""
+    root = Path(root)
+    if not root.is_dir():
+        raise FormatError(root, "no such directory")
+    return sorted(p.parent for p in root.rglob("meta.json"))
+
+
+def write_meta(folder: str | Path, meta: RecordingMeta, truth: dict | None = None) -> None:
+    atomic_write_text(Path(folder) / "meta.json", json.dumps(meta.to_json(truth), indent=1) + "\n")

@@ -1,0 +1,173 @@
+"""Leap Motion ``leap.jsonl`` (a subset of the WebSocket frame, protocol v6): reader and writer.
+
+Leap frame: millimetres, origin at the device, +y up, +x right, +z toward the user; timestamps in
+microseconds. Each hand has a ``wrist``; each pointable (``type`` 0..4 = thumb..pinky) has
+carp/mcp/pip/dip/btip positions. Mapping to the canonical skeleton: thumb carp == mcp (Leap's
+zero-length thumb metacarpal), so thumb mcp/pip/dip/btip are CMC/MCP/IP/tip; other fingers'
+mcp/pip/dip/btip are MCP/PIP/DIP/tip; the wrist comes from the hand's ``wrist`` field.
+
+Frames without hands are kept as untracked steps (mask False); nothing is invented.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from handradar.errors import FormatError
+from handradar.hand.skeleton import HANDS, N_JOINTS, HandSequence
+
+LEAP_JOINT_FIELDS = ("mcpPosition", "pipPosition", "dipPosition", "btipPosition")
+
+
+def _vec3(path: Path, lineno: int, what: str, value: object) -> list[float]:
+    if (not isinstance(value, list) or len(value) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+        raise FormatError(path, f"{what}: expected [x, y, z] numbers, found {value!r:.80}", line=lineno)
+    if not all(math.isfinite(v) for v in value):
+        raise FormatError(path, f"{what}: NaN or infinite coordinate {value!r}", line=lineno)
+    return [float(v) for v in value]
+
+
+def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """One frame -> (timestamp_us, joints (2, 21, 3) Leap mm, tracked (2,))."""
+    if not isinstance(obj, dict):
+        raise FormatError(path, f"expected a JSON object per line, found {type(obj).__name__}", line=lineno)
+    ts = obj.get("timestamp")
+    if not isinstance(ts, (int, float)) or isinstance(ts, bool) or not math.isfinite(ts):
+        raise FormatError(path, f"'timestamp' must be a number of microseconds, found {ts!r:.40}", line=lineno)
+    hands = obj.get("hands", [])
+    pointables = obj.get("pointables", [])
+    if not isinstance(hands, list) or not isinstance(pointables, list):
+        raise FormatError(path, "'hands' and 'pointables' must be lists", line=lineno)
+    joints = np.zeros((2, N_JOINTS, 3), dtype=np.float64)
+    tracked = np.zeros(2, dtype=bool)
+    slot_of_id: dict[object, int] = {}
+    for hand in hands:
+        if not isinstance(hand, dict):
+            raise FormatError(path, "each hand must be a JSON object", line=lineno)
+        kind = hand.get("type")
+        if kind not in HANDS:
+            raise FormatError(path, f"hand 'type' must be 'right' or 'left', found {kind!r:.40}", line=lineno)
+        slot = HANDS.index(kind)
+        if tracked[slot]:
+            continue  # a second hand of the same side: keep the first, as Leap's own API does
+        if "wrist" not in hand:
+            raise FormatError(path, f"{kind} hand (id {hand.get('id')!r}) has no 'wrist'", line=lineno)
+        joints[slot, 0] = _vec3(path, lineno, f"{kind} hand wrist", hand["wrist"])
+        tracked[slot] = True
+        slot_of_id[hand.get("id")] = slot
+    found = np.zeros((2, 5), dtype=bool)
+    for p in pointables:
+        if not isinstance(p, dict):
+            raise FormatError(path, "each pointable must be a JSON object", line=lineno)
+        slot = slot_of_id.get(p.get("handId"))
+        if slot is None:
+            continue  # pointable of an ignored or unknown hand
+        f = p.get("type")
+        if not isinstance(f, int) or isinstance(f, bool) or not 0 <= f <= 4:
+            raise FormatError(path, f"pointable 'type' must be 0..4 (thumb..pinky), found {f!r:.40}", line=lineno)
+        for j, key in enumerate(LEAP_JOINT_FIELDS):
+            if key not in p:
+                raise FormatError(path, f"{HANDS[slot]} hand finger {f} has no '{key}'", line=lineno)
+            joints[slot, 1 + 4 * f + j] = _vec3(path, lineno, f"{HANDS[slot]} finger {f} {key}", p[key])
+        found[slot, f] = True
+    for slot in np.flatnonzero(tracked):
+        if not found[slot].all():
+            missing = [int(f) for f in np.flatnonzero(~found[slot])]
+            raise FormatError(path, f"{HANDS[slot]} hand is tracked but finger(s) {missing} have no pointable "
+                                    "(expected all five, types 0..4)", line=lineno)
+    return float(ts), joints, tracked
+
+
+def leap_matrix(value: object, source: str | Path) -> np.ndarray:
+    """Validate a 4x4 row-major Leap-mm -> radar-m matrix with last row [0, 0, 0, 1]."""
+    try:
+        m = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise FormatError(source, f"leap_to_radar must be a 4x4 matrix of numbers, found {value!r:.80}") from None
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise FormatError(source, f"leap_to_radar must be a finite 4x4 matrix, found shape {m.shape}")
+    if not np.allclose(m[3], [0, 0, 0, 1]):
+        raise FormatError(source, f"leap_to_radar last row must be [0, 0, 0, 1], found {m[3].tolist()}")
+    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        raise FormatError(source, "leap_to_radar is singular")
+    return m
+
+
+def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray, radar_start_us: float) -> HandSequence:
+    """Read ``leap.jsonl`` into a radar-frame HandSequence; time 0 is the start of radar frame 0."""
+    path = Path(path)
+    m = leap_matrix(leap_to_radar, path)
+    stamps: list[float] = []
+    frames: list[np.ndarray] = []
+    masks: list[np.ndarray] = []
+    try:
+        fh = path.open("r", encoding="utf-8")
+    except OSError as exc:
+        raise FormatError(path, f"cannot read: {exc.strerror}") from None
+    with fh:
+        for lineno, line in enumerate(fh, start=1):
+            if not line.strip():
+                continue
+            try:
+                obj = json.loads(line)
+            except json.JSONDecodeError as exc:
+                raise FormatError(path, f"invalid JSON ({exc.msg} at column {exc.colno})", line=lineno) from None
+            except UnicodeDecodeError:
+                raise FormatError(path, "not UTF-8 text", line=lineno) from None
+            ts, joints, tracked = parse_leap_frame(obj, path, lineno)
+            if stamps and ts <= stamps[-1]:
+                raise FormatError(path, f"timestamps must increase: {ts:.0f} us follows {stamps[-1]:.0f} us", line=lineno)
+            stamps.append(ts)
+            frames.append(joints)
+            masks.append(tracked)
+    if len(stamps) < 2:
+        raise FormatError(path, f"expected at least 2 frames, found {len(stamps)}")
+    joints_mm = np.stack(frames)
+    radar = joints_mm @ m[:3, :3].T + m[:3, 3]
+    times = (np.asarray(stamps) - float(radar_start_us)) * 1e-6
+    return HandSequence(radar.astype(np.float32), times, np.stack(masks), source=str(path))
+
+
+def leap_frames_from_sequence(seq: HandSequence, radar_to_leap: np.ndarray, radar_start_us: float,
+                              *, finger_width_mm: float = 18.0) -> Iterable[dict]:
+    """Leap frames (dicts) for a radar-frame sequence: the inverse of :func:`read_leap_jsonl`."""
+    m = np.asarray(radar_to_leap, dtype=np.float64)
+    mm = seq.positions.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+    for t in range(seq.n_steps):
+        ts = int(round(seq.times[t] * 1e6 + radar_start_us))
+        hands, pointables = [], []
+        for slot, kind in enumerate(HANDS):
+            if not seq.mask[t, slot]:
+                continue
+            hid = slot + 1
+            j = mm[t, slot]
+            palm = j[[0, 5, 9, 13, 17]].mean(axis=0)
+            direction = j[9] - j[0]
+            direction /= np.linalg.norm(direction) + 1e-12
+            normal = np.cross(j[5] - j[0], j[17] - j[0]) * (1 if kind == "right" else -1)
+            normal /= np.linalg.norm(normal) + 1e-12
+            hands.append({"id": hid, "type": kind, "palmPosition": palm.round(3).tolist(),
+                          "palmNormal": normal.round(5).tolist(), "direction": direction.round(5).tolist(),
+                          "palmWidth": float(np.linalg.norm(j[5] - j[17]).round(3)),
+                          "wrist": j[0].round(3).tolist(), "elbow": (j[0] - 250.0 * direction).round(3).tolist()})
+            for f in range(5):
+                joints = j[1 + 4 * f: 5 + 4 * f]
+                carp = joints[0] if f == 0 else j[0] + 0.25 * (joints[0] - j[0])
+                p = {"handId": hid, "type": f, "width": finger_width_mm, "carpPosition": carp.round(3).tolist()}
+                p.update({k: joints[i].round(3).tolist() for i, k in enumerate(LEAP_JOINT_FIELDS)})
+                pointables.append(p)
+        yield {"id": t, "timestamp": ts, "currentFrameRate": float(1.0 / np.median(np.diff(seq.times))),
+               "hands": hands, "pointables": pointables}
+
+
+def write_leap_jsonl(path: str | Path, frames: Iterable[dict]) -> None:
+    """Write frames, one compact JSON object per line (atomically)."""
+    from handradar.atomic import atomic_write_text
+
+    atomic_write_text(path, "".join(json.dumps(f, separators=(",", ":")) + "\n" for f in frames))

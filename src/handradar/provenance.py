@@ -1,0 +1,44 @@
+"""Provenance: code version and config hashes that key caches and tag outputs."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import subprocess
+from pathlib import Path
+
+from handradar import __version__
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+@functools.cache
+def code_version() -> str:
+    """``<package version>+g<git sha>[.dirty]`` when run from a git checkout, else the version."""
+    try:
+        sha = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=REPO_ROOT, capture_output=True,
+                             text=True, timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO_ROOT,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return __version__
+    return f"{__version__}+g{sha}{'.dirty' if dirty else ''}"
+
+
+def _canonical(obj: object) -> object:
+    if hasattr(obj, "__dataclass_fields__"):
+        return {k: _canonical(getattr(obj, k)) for k in obj.__dataclass_fields__ if k != "source"}
+    if isinstance(obj, dict):
+        return {str(k): _canonical(v) for k, v in sorted(obj.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(obj, (list, tuple)):
+        return [_canonical(v) for v in obj]
+    if isinstance(obj, float):
+        return float(f"{obj:.12g}")
+    return obj
+
+
+def config_hash(*parts: object) -> str:
+    """Stable 16-hex-digit hash of dataclasses, dicts, lists and scalars."""
+    text = json.dumps([_canonical(p) for p in parts], sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -1,0 +1,243 @@
+"""The one processing chain shared by measured and simulated data.
+
+Measured ADC and simulated signals meet at the *per-range-bin slow-time signal*: a complex
+tensor of shape ``(..., frames, loops, channels, bins)`` holding the windowed range-FFT value of
+each gated range bin for every chirp loop (slow time), every virtual channel (chirp-of-loop x RX)
+and every frame. From there every step is shared:
+
+    static clutter removal -> STFT over slow time inside each frame (Hamming 64, hop 64,
+    two-sided, zero Doppler centred) -> power summed over gated bins and channels ->
+    dB with a floor -> [0, 1]
+
+Measured data reach that signal through :func:`range_profiles_from_adc` (an explicit FFT);
+the simulator through :func:`range_response` (the closed-form response of the same windowed
+FFT to a beat tone), so both see the same window and the same bins.
+
+Sign convention: a reflector at range R contributes ``A * exp(j 2 pi f_b n / fs) * exp(-j 4 pi R / lambda)``
+with ``f_b = 2 S R / c``. An *approaching* reflector (R decreasing) therefore has a rising phase
+and lands at *positive* Doppler, i.e. above the centre row of the spectrogram (rows > n/2);
+a receding one lands below it.
+
+All functions are plain torch and differentiable; none holds state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+import torch
+
+from handradar.radar.config import RadarConfig
+
+# Generalised cosine windows w[n] = sum_m (-1)^m a_m cos(2 pi m n / N) (periodic form).
+COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
+    "rect": (1.0,),
+    "hann": (0.5, 0.5),
+    "hamming": (0.54, 0.46),
+    "blackman": (0.42, 0.5, 0.08),
+}
+
+
+@dataclass(frozen=True)
+class ChainConfig:
+    """Settings of the processing chain (the same for measured and simulated data).
+
+    gate_m: range interval (metres) of the bins kept; the hand is expected inside it.
+    stft_len / stft_hop: slow-time STFT window length and hop, in chirp loops; windows never
+    straddle two frames (frames are separated by idle time).
+    n_columns: spectrogram width; it must be a whole number of frames' worth of columns.
+    dynamic_range_db: values more than this below the spectrogram's peak are clamped to 0.
+    """
+
+    range_window: str = "hann"
+    gate_m: tuple[float, float] = (0.08, 0.70)
+    stft_window: str = "hamming"
+    stft_len: int = 64
+    stft_hop: int = 64
+    n_columns: int = 32
+    dynamic_range_db: float = 40.0
+    clutter_removal: bool = True
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "gate_m", (float(self.gate_m[0]), float(self.gate_m[1])))
+        for name in (self.range_window, self.stft_window):
+            if name not in COSINE_WINDOWS:
+                raise ValueError(f"unknown window {name!r}; expected one of {sorted(COSINE_WINDOWS)}")
+        if not 0 <= self.gate_m[0] < self.gate_m[1]:
+            raise ValueError(f"gate_m must be an increasing pair of ranges >= 0, found {self.gate_m}")
+        if self.stft_len <= 0 or self.stft_hop <= 0 or self.n_columns <= 0 or self.dynamic_range_db <= 0:
+            raise ValueError("stft_len, stft_hop, n_columns and dynamic_range_db must be positive")
+
+    def columns_per_frame(self, radar: RadarConfig) -> int:
+        if radar.n_loops < self.stft_len:
+            raise ValueError(f"a frame has {radar.n_loops} loops, fewer than the STFT length {self.stft_len}")
+        return (radar.n_loops - self.stft_len) // self.stft_hop + 1
+
+    def frames_per_window(self, radar: RadarConfig) -> int:
+        """Frames spanned by one ``n_columns`` spectrogram (16 for the default radar)."""
+        cpf = self.columns_per_frame(radar)
+        if self.n_columns % cpf:
+            raise ValueError(f"n_columns {self.n_columns} is not a multiple of the {cpf} STFT columns per frame")
+        return self.n_columns // cpf
+
+
+def window(name: str, n: int, *, dtype: torch.dtype = torch.float32, device: torch.device | str | None = None) -> torch.Tensor:
+    """Periodic (DFT-even) window of length n, the form used before an FFT."""
+    w = scipy.signal.get_window("boxcar" if name == "rect" else name, n, fftbins=True)
+    return torch.as_tensor(w, dtype=dtype, device=device)
+
+
+def gate_bins(radar: RadarConfig, chain: ChainConfig) -> tuple[int, int]:
+    """Half-open range-bin interval [b0, b1) covering ``chain.gate_m``."""
+    res = radar.range_resolution_m
+    b0 = max(0, math.ceil(chain.gate_m[0] / res - 1e-9))
+    b1 = min(radar.n_range_bins, math.floor(chain.gate_m[1] / res + 1e-9) + 1)
+    if b1 <= b0:
+        raise ValueError(f"range gate {chain.gate_m} m holds no bin of {res:.4f} m below {radar.max_range_m:.2f} m")
+    return b0, b1
+
+
+# ---- entering the chain ------------------------------------------------------------------------
+def range_profiles_from_adc(adc: torch.Tensor, radar: RadarConfig, chain: ChainConfig) -> torch.Tensor:
+    """Measured path: ADC cube (frames, chirps_per_frame, rx, samples) -> (frames, loops, channels, gated bins).
+
+    Windowed FFT over fast time; chirps are split loop-major into (loops, chirps_per_loop) and each
+    chirp-of-loop x RX pair becomes a virtual channel.
+    """
+    frames, chirps, n_rx, n = adc.shape[-4:]
+    if (chirps, n_rx, n) != (radar.chirps_per_frame, radar.n_rx, radar.n_samples):
+        raise ValueError(f"ADC cube shape {tuple(adc.shape)} does not match the radar config "
+                         f"(frames, {radar.chirps_per_frame}, {radar.n_rx}, {radar.n_samples})")
+    b0, b1 = gate_bins(radar, chain)
+    w = window(chain.range_window, n, dtype=adc.real.dtype, device=adc.device)
+    spectrum = torch.fft.fft(adc * w, dim=-1)[..., b0:b1]
+    lead = adc.shape[:-4]
+    spectrum = spectrum.reshape(*lead, frames, radar.n_loops, radar.chirps_per_loop * n_rx, b1 - b0)
+    return spectrum
+
+
+def dirichlet(nu: torch.Tensor, n: int) -> torch.Tensor:
+    """D(nu) = sum_{k<n} exp(j 2 pi nu k): the DTFT of a length-n rectangle, nu in cycles/sample."""
+    nu = nu - torch.round(nu)  # D has period 1 in nu: keep |nu| <= 1/2 so only nu = 0 is singular
+    small = nu.abs() < 1e-7
+    s = torch.sin(math.pi * nu)
+    ratio = torch.where(small, torch.full_like(nu, float(n)),
+                        torch.sin(math.pi * n * nu) / torch.where(small, torch.ones_like(s), s))
+    phase = math.pi * (n - 1) * nu
+    return torch.complex(ratio * torch.cos(phase), ratio * torch.sin(phase))
+
+
+def range_response(beat_cycles: torch.Tensor, bins: torch.Tensor, n: int, window_name: str) -> torch.Tensor:
+    """Closed-form windowed range FFT of a unit beat tone.
+
+    beat_cycles: beat frequency in cycles per sample (f_b / fs), any shape S.
+    bins: range-bin indices, shape (B,). Returns complex (*S, B): sum_k w[k] exp(j 2 pi (nu - b/n) k),
+    exactly what :func:`range_profiles_from_adc` gives for ``exp(j 2 pi nu k)``.
+    """
+    nu = beat_cycles.unsqueeze(-1) - bins.to(beat_cycles.dtype) / n
+    out = 0
+    for m, a in enumerate(COSINE_WINDOWS[window_name]):
+        if m == 0:
+            out = out + a * dirichlet(nu, n)
+        else:
+            out = out + ((-1) ** m) * a / 2 * (dirichlet(nu + m / n, n) + dirichlet(nu - m / n, n))
+    return out
+
+
+# ---- shared steps --------------------------------------------------------------------------------
+def remove_static_clutter(profiles: torch.Tensor) -> torch.Tensor:
+    """Subtract the slow-time mean of each range bin and channel over all frames and loops."""
+    return profiles - profiles.mean(dim=(-4, -3), keepdim=True)
+
+
+def stft_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
+    """STFT over slow time inside each frame, power summed over channels and gated bins.
+
+    profiles (..., frames, loops, channels, bins) -> power (..., doppler = stft_len, columns),
+    columns in time order (``columns_per_frame`` per frame), zero Doppler at row stft_len // 2.
+    """
+    frames, loops = profiles.shape[-4:-2]
+    n_win = (loops - chain.stft_len) // chain.stft_hop + 1
+    if n_win < 1:
+        raise ValueError(f"{loops} loops per frame is fewer than the STFT length {chain.stft_len}")
+    starts = torch.arange(n_win, device=profiles.device) * chain.stft_hop
+    idx = starts[:, None] + torch.arange(chain.stft_len, device=profiles.device)[None, :]
+    segs = profiles[..., idx, :, :]  # (..., frames, n_win, len, ch, bins)
+    w = window(chain.stft_window, chain.stft_len, dtype=profiles.real.dtype, device=profiles.device)
+    spec = torch.fft.fftshift(torch.fft.fft(segs * w[:, None, None], dim=-3), dim=-3)
+    power = (spec.real**2 + spec.imag**2).sum(dim=(-2, -1))  # (..., frames, n_win, doppler)
+    power = power.flatten(-3, -2)  # (..., columns, doppler)
+    return power.transpose(-1, -2)
+
+
+def select_window_start(power: torch.Tensor, chain: ChainConfig, columns_per_frame: int) -> int:
+    """First frame of the ``n_columns`` window (frame-aligned) holding the most energy.
+
+    power: (doppler, columns) of one recording. Frame alignment keeps the window's chirp times
+    identical for measured and simulated data.
+    """
+    per_col = power.detach().sum(dim=-2).reshape(-1)
+    n_cols = per_col.shape[0]
+    if n_cols < chain.n_columns:
+        raise ValueError(f"capture gives {n_cols} STFT columns, fewer than the {chain.n_columns} of a spectrogram")
+    frame_energy = per_col[: n_cols - n_cols % columns_per_frame].reshape(-1, columns_per_frame).sum(-1)
+    fpw = chain.n_columns // columns_per_frame
+    sums = frame_energy.unfold(0, fpw, 1).sum(-1)
+    return int(torch.argmax(sums))
+
+
+def power_to_unit(power: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
+    """Power -> dB -> clamp at ``dynamic_range_db`` below each spectrogram's peak -> [0, 1].
+
+    The peak is taken over the last two dims (doppler, columns) of each spectrogram.
+    """
+    peak = power.detach().amax(dim=(-2, -1), keepdim=True)
+    db = 10.0 * torch.log10(power + 1e-12 * peak + 1e-30)
+    top = db.amax(dim=(-2, -1), keepdim=True)
+    return ((db - top + chain.dynamic_range_db) / chain.dynamic_range_db).clamp(0.0, 1.0)
+
+
+def spectrogram_from_profiles(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
+    """Per-range-bin slow-time signal of one window -> spectrogram in [0, 1] (..., doppler, columns)."""
+    if chain.clutter_removal:
+        profiles = remove_static_clutter(profiles)
+    return power_to_unit(stft_power(profiles, chain), chain)
+
+
+def measured_spectrogram(adc: np.ndarray | torch.Tensor, radar: RadarConfig, chain: ChainConfig) -> tuple[torch.Tensor, int]:
+    """Measured path end to end: ADC cube -> (spectrogram (doppler, n_columns), window start frame).
+
+    The window is chosen on the whole capture; its spectrogram is then computed from the window's
+    frames alone, exactly as the simulator computes it, so both see the same clutter mean.
+    """
+    adc_t = torch.as_tensor(adc)
+    profiles = range_profiles_from_adc(adc_t, radar, chain)
+    fpw = chain.frames_per_window(radar)
+    if profiles.shape[-4] < fpw:
+        raise ValueError(f"capture has {profiles.shape[-4]} frames, fewer than the {fpw} of one spectrogram")
+    full = stft_power(remove_static_clutter(profiles) if chain.clutter_removal else profiles, chain)
+    start = select_window_start(full, chain, chain.columns_per_frame(radar))
+    return spectrogram_from_profiles(profiles[..., start:start + fpw, :, :, :], chain), start
+
+
+# ---- axes ---------------------------------------------------------------------------------------
+def doppler_axis_hz(radar: RadarConfig, chain: ChainConfig) -> np.ndarray:
+    """Doppler frequency of each spectrogram row (row stft_len // 2 is zero)."""
+    k = np.arange(chain.stft_len) - chain.stft_len // 2
+    return k / (chain.stft_len * radar.loop_period_s)
+
+
+def velocity_axis_m_s(radar: RadarConfig, chain: ChainConfig) -> np.ndarray:
+    """Radial velocity of each row; positive = approaching the radar."""
+    return doppler_axis_hz(radar, chain) * radar.wavelength_m / 2.0
+
+
+def column_times_s(radar: RadarConfig, chain: ChainConfig, n_frames: int, start_frame: int = 0) -> np.ndarray:
+    """Centre time of each STFT column of frames [start_frame, start_frame + n_frames)."""
+    t = radar.chirp_times_s(start_frame + n_frames)[start_frame:, :, 0]  # (frames, loops)
+    cpf = chain.columns_per_frame(radar)
+    cols = [t[:, s * chain.stft_hop: s * chain.stft_hop + chain.stft_len].mean(axis=1) for s in range(cpf)]
+    return np.stack(cols, axis=1).reshape(-1)

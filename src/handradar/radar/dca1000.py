@@ -1,0 +1,91 @@
+"""DCA1000 raw capture (``adc_data.bin``) reader and writer.
+
+Layout (xWR16xx/18xx, 2-lane LVDS, complex, non-interleaved): little-endian int16, every 4
+values are ``I(n) I(n+1) Q(n) Q(n+1)``; within a chirp all samples of the first enabled RX,
+then the next RX; chirps in time order (loop-major, then TX); frames back to back.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from handradar.atomic import atomic_write_bytes
+from handradar.errors import FormatError
+from handradar.radar.config import RadarConfig
+
+INT16_FULL_SCALE = 32767
+
+
+def _expected_frames(cfg: RadarConfig, path: Path, size: int, allow_truncated: bool) -> int:
+    fb = cfg.frame_bytes()
+    whole, rest = divmod(size, fb)
+    if cfg.n_frames:
+        expected = cfg.n_frames * fb
+        if size == expected:
+            return cfg.n_frames
+        if allow_truncated and rest and whole == cfg.n_frames - 1:
+            warnings.warn(f"{path}: last frame truncated ({rest} of {fb} bytes); dropping it, "
+                          f"keeping {whole} of {cfg.n_frames} frames", stacklevel=3)
+            return whole
+        raise FormatError(path, f"size {size} bytes does not match the .cfg: expected {expected} bytes "
+                                f"({cfg.n_frames} frames x {cfg.chirps_per_frame} chirps x {cfg.n_rx} RX x "
+                                f"{cfg.n_samples} samples x 4 bytes)")
+    # numFrames 0: continuous capture, the file decides the number of frames
+    if whole == 0:
+        raise FormatError(path, f"size {size} bytes holds no complete frame: expected a multiple of {fb} bytes "
+                                f"({cfg.chirps_per_frame} chirps x {cfg.n_rx} RX x {cfg.n_samples} samples x 4 bytes)")
+    if rest:
+        if not allow_truncated:
+            raise FormatError(path, f"size {size} bytes is not a whole number of frames: expected a multiple of "
+                                    f"{fb} bytes ({cfg.chirps_per_frame} chirps x {cfg.n_rx} RX x {cfg.n_samples} "
+                                    f"samples x 4 bytes), found {whole} frames + {rest} bytes "
+                                    "(pass allow_truncated=True to drop the partial last frame)")
+        warnings.warn(f"{path}: last frame truncated ({rest} of {fb} bytes); dropping it, keeping {whole} frames",
+                      stacklevel=3)
+    return whole
+
+
+def read_adc(path: str | Path, cfg: RadarConfig, *, allow_truncated: bool = False) -> np.ndarray:
+    """Read a capture as complex64 ADC counts, shape (frames, chirps_per_frame, rx, samples)."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise FormatError(path, f"cannot read: {exc.strerror}") from None
+    n_frames = _expected_frames(cfg, path, size, allow_truncated)
+    count = n_frames * cfg.frame_bytes() // 2
+    raw = np.fromfile(path, dtype="<i2", count=count)
+    raw = raw.reshape(n_frames, cfg.chirps_per_frame, cfg.n_rx, cfg.n_samples // 2, 4)
+    out = np.empty((n_frames, cfg.chirps_per_frame, cfg.n_rx, cfg.n_samples), dtype=np.complex64)
+    out.real = raw[..., 0:2].reshape(out.shape)
+    out.imag = raw[..., 2:4].reshape(out.shape)
+    return out
+
+
+def quantise(adc: np.ndarray) -> tuple[np.ndarray, int]:
+    """Round complex ADC counts to int16 I and Q; returns (I/Q int16 pair, clipped count)."""
+    parts = np.stack([adc.real, adc.imag], axis=0)
+    clipped = int(np.count_nonzero(np.abs(parts) > INT16_FULL_SCALE))
+    return np.clip(np.rint(parts), -INT16_FULL_SCALE - 1, INT16_FULL_SCALE).astype("<i2"), clipped
+
+
+def encode_adc(adc: np.ndarray, cfg: RadarConfig) -> bytes:
+    """Encode a (frames, chirps_per_frame, rx, samples) complex cube in the DCA1000 layout."""
+    expected = (cfg.chirps_per_frame, cfg.n_rx, cfg.n_samples)
+    if adc.ndim != 4 or adc.shape[1:] != expected:
+        raise ValueError(f"ADC cube shape {adc.shape} does not match the config: expected (frames, {expected[0]}, "
+                         f"{expected[1]}, {expected[2]})")
+    (i, q), clipped = quantise(adc)
+    if clipped:
+        warnings.warn(f"{clipped} ADC values exceed int16 full scale and were clipped", stacklevel=2)
+    shape = adc.shape[:-1] + (cfg.n_samples // 2, 2)
+    packed = np.concatenate([i.reshape(shape), q.reshape(shape)], axis=-1)
+    return packed.astype("<i2").tobytes()
+
+
+def write_adc(path: str | Path, adc: np.ndarray, cfg: RadarConfig) -> None:
+    """Write a complex cube (ADC counts) as ``adc_data.bin``, atomically."""
+    atomic_write_bytes(path, encode_adc(adc, cfg))

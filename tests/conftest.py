@@ -1,0 +1,38 @@
+"""Shared fixtures: the default radar and chain, the shared data folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from handradar.radar.chain import ChainConfig
+from handradar.radar.config import RadarConfig
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+DEFAULT_CFG = """\
+% the default radar of DESIGN section 5
+channelCfg 1 1 0
+adcCfg 2 1
+profileCfg 0 77 338.8 6 51.2 0 0 76.22 1 256 10000 0 0 30
+chirpCfg 0 0 0 0 0 0 0 1
+frameCfg 0 0 128 0 100 1 0
+"""
+
+
+@pytest.fixture(scope="session")
+def radar() -> RadarConfig:
+    return RadarConfig.from_cfg_text(DEFAULT_CFG, "default.cfg")
+
+
+@pytest.fixture(scope="session")
+def chain() -> ChainConfig:
+    return ChainConfig()
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> Path:
+    if not SHARED.is_dir():
+        pytest.fail(f"../shared not found at {SHARED}: the tests need the shared data folder beside the repo")
+    return SHARED

@@ -1,0 +1,167 @@
+"""The processing chain against closed forms: point targets, bin responses, frame gaps."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from handradar.radar.chain import (
+    ChainConfig,
+    column_times_s,
+    gate_bins,
+    measured_spectrogram,
+    range_profiles_from_adc,
+    range_response,
+    spectrogram_from_profiles,
+    velocity_axis_m_s,
+)
+from handradar.radar.signal import beat_signal
+
+
+def point_target_adc(radar, n_frames: int, r0: float, v_away: float, amplitude: float = 2000.0) -> np.ndarray:
+    """ADC of one point target moving with constant radial velocity (positive = receding),
+    its range taken at the true chirp times (idle gaps between frames included)."""
+    t = radar.chirp_times_s(n_frames)[..., 0]  # (frames, loops)
+    ranges = (r0 + v_away * t).reshape(n_frames, radar.chirps_per_frame, 1, 1)
+    return beat_signal(radar, ranges, np.full(ranges.shape, amplitude))
+
+
+def expected_doppler_row(radar, chain, v_away: float) -> int:
+    f_d = -2.0 * v_away / radar.wavelength_m  # approaching (v_away < 0) -> positive Doppler
+    return int(round(f_d * chain.stft_len * radar.loop_period_s)) + chain.stft_len // 2
+
+
+@pytest.mark.parametrize("v_away", [-0.6, -0.25, 0.3, 0.9])
+def test_point_target_lands_in_expected_doppler_row_every_column(radar, chain, v_away):
+    n_frames = 16
+    chain = dataclasses.replace(chain, gate_m=(0.05, 2.5))
+    r0 = 1.2 - v_away * 0.8  # stays inside the gate for the whole capture
+    adc = point_target_adc(radar, n_frames, r0, v_away)
+    spec, start = measured_spectrogram(adc, radar, chain)
+    assert spec.shape == (chain.stft_len, chain.n_columns) and start == 0
+    rows = spec.argmax(dim=0)
+    expected = expected_doppler_row(radar, chain, v_away)
+    # every column, including the pairs on both sides of each inter-frame gap (columns 1|2, 3|4, ...)
+    assert rows.tolist() == [expected] * chain.n_columns
+    # and the measured velocity agrees with the set one within half a bin
+    v_bin = velocity_axis_m_s(radar, chain)
+    assert abs(v_bin[expected] - (-v_away)) <= 0.5 * (v_bin[1] - v_bin[0]) + 1e-9
+
+
+def test_approaching_and_receding_are_on_opposite_sides(radar, chain):
+    centre = chain.stft_len // 2
+    toward, _ = measured_spectrogram(point_target_adc(radar, 16, 0.6, -0.25), radar, chain)
+    away, _ = measured_spectrogram(point_target_adc(radar, 16, 0.2, +0.25), radar, chain)
+    assert (toward.argmax(0) > centre).all()  # approaching: positive Doppler, rows above the centre
+    assert (away.argmax(0) < centre).all()
+
+
+def test_point_target_lands_in_expected_range_bin(radar, chain):
+    b0, b1 = gate_bins(radar, chain)
+    for r in (0.15, 0.31, 0.52):
+        profiles = range_profiles_from_adc(torch.as_tensor(point_target_adc(radar, 1, r, 0.0)), radar, chain)
+        peak = int(profiles.abs().mean(dim=(0, 1, 2)).argmax()) + b0
+        assert peak == round(r / radar.range_resolution_m)
+
+
+def test_gap_phase_continuity_matters(radar, chain):
+    """Interpolating motion by chirp index (ignoring the idle gap) gives a different signal: the
+    chain must be fed true chirp times. A target whose phase jumps at the gaps still lands in its
+    bin because windows never straddle frames."""
+    t = radar.chirp_times_s(2)[..., 0]
+    gapless = np.arange(t.size).reshape(t.shape) * radar.chirp_period_s
+    assert t[1, 0] - t[0, -1] > 100 * radar.chirp_period_s
+    assert not np.allclose(t, gapless + t[0, 0])
+
+
+def test_closed_form_range_response_matches_explicit_fft(radar, chain):
+    rng = np.random.default_rng(0)
+    ranges = rng.uniform(0.1, 0.6, size=(2, radar.chirps_per_frame, 1, 3))
+    amps = rng.uniform(100, 1000, size=ranges.shape)
+    adc = beat_signal(radar, ranges, amps)
+    fft = range_profiles_from_adc(torch.as_tensor(adc), radar, chain)  # (2, loops, 1, bins)
+    b0, b1 = gate_bins(radar, chain)
+    nu = torch.as_tensor(radar.beat_frequency_hz(ranges) / radar.sample_rate_hz)
+    carrier = torch.as_tensor(amps * np.exp(-4j * np.pi * ranges / radar.wavelength_m))
+    closed = (range_response(nu, torch.arange(b0, b1), radar.n_samples, chain.range_window)
+              * carrier[..., None]).sum(dim=-2)  # sum the 3 reflectors
+    err = (closed.to(torch.complex64) - fft).abs().max() / fft.abs().max()
+    assert err < 1e-5
+
+
+@pytest.mark.parametrize("window_name", ["rect", "hann", "hamming", "blackman"])
+def test_range_response_equals_dtft_of_window(window_name):
+    from handradar.radar.chain import window
+
+    n = 64
+    w = window(window_name, n, dtype=torch.float64)
+    nu = torch.tensor([0.0, 0.013, 0.25, 3.0 / n, -0.4], dtype=torch.float64)
+    bins = torch.arange(0, 10)
+    k = torch.arange(n, dtype=torch.float64)
+    explicit = (w * torch.exp(2j * np.pi * (nu[:, None, None] - bins[None, :, None] / n) * k)).sum(-1)
+    closed = range_response(nu, bins, n, window_name)
+    torch.testing.assert_close(closed, explicit, atol=1e-9, rtol=1e-9)
+
+
+def test_range_response_is_differentiable():
+    nu = torch.tensor([0.0101, 0.3], dtype=torch.float64, requires_grad=True)
+    bins = torch.arange(0, 6)
+    torch.autograd.gradcheck(lambda x: torch.view_as_real(range_response(x, bins, 32, "hann")), (nu,))
+
+
+def test_static_clutter_is_removed(radar, chain):
+    static = point_target_adc(radar, 16, 0.30, 0.0, amplitude=20000.0)
+    moving = point_target_adc(radar, 16, 0.50, -0.3, amplitude=200.0)
+    spec, _ = measured_spectrogram(static + moving, radar, chain)
+    assert (spec.argmax(0) == expected_doppler_row(radar, chain, -0.3)).all()
+
+
+def test_spectrogram_range_and_floor(radar, chain):
+    spec, _ = measured_spectrogram(point_target_adc(radar, 16, 0.4, -0.2), radar, chain)
+    assert float(spec.min()) == 0.0 and float(spec.max()) == 1.0
+    narrow = dataclasses.replace(chain, dynamic_range_db=10.0)
+    spec10, _ = measured_spectrogram(point_target_adc(radar, 16, 0.4, -0.2), radar, narrow)
+    assert (spec10 == 0).float().mean() > (spec == 0).float().mean()
+
+
+def test_window_selection_finds_the_motion(radar, chain):
+    """A target that moves only during frames 10..25 of a 30-frame capture is windowed there."""
+    n_frames = 30
+    t = radar.chirp_times_s(n_frames)[..., 0]
+    tt = np.clip(t, 1.0, 2.6)
+    ranges = (0.5 - 0.4 * (tt - 1.0) / 1.6).reshape(n_frames, -1, 1, 1)
+    adc = beat_signal(radar, ranges, np.full(ranges.shape, 1000.0))
+    _, start = measured_spectrogram(adc, radar, chain)
+    assert start == 10
+
+
+def test_column_times_follow_frames(radar, chain):
+    times = column_times_s(radar, chain, n_frames=3)
+    assert times.shape == (6,)
+    # two columns per frame, 64 loops apart; the next frame starts one period later
+    np.testing.assert_allclose(times[1] - times[0], 64 * radar.loop_period_s)
+    np.testing.assert_allclose(times[2] - times[0], radar.frame_period_s)
+
+
+def test_sim_and_measured_enter_the_same_chain(radar, chain):
+    """Closed-form profiles through spectrogram_from_profiles equal the ADC path's spectrogram."""
+    adc = point_target_adc(radar, 16, 0.45, -0.35)
+    measured, _ = measured_spectrogram(adc, radar, chain)
+    t = radar.chirp_times_s(16)[..., 0]
+    r = torch.as_tensor(0.45 - 0.35 * t)
+    b0, b1 = gate_bins(radar, chain)
+    nu = torch.as_tensor(radar.beat_frequency_hz(r.numpy()) / radar.sample_rate_hz)
+    prof = range_response(nu, torch.arange(b0, b1), radar.n_samples, chain.range_window)
+    prof = (prof * 2000.0 * torch.exp(-4j * np.pi * r / radar.wavelength_m)[..., None])[:, :, None, :]
+    simulated = spectrogram_from_profiles(prof.to(torch.complex64), chain)
+    assert (simulated - measured).abs().max() < 1e-3
+
+
+def test_chain_config_rejects_bad_settings():
+    with pytest.raises(ValueError, match="unknown window"):
+        ChainConfig(range_window="kaiser-ish")
+    with pytest.raises(ValueError, match="gate_m"):
+        ChainConfig(gate_m=(0.5, 0.2))
