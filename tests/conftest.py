@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -10,7 +11,7 @@ from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
+SHARED = Path(os.environ.get("HANDRADAR_SHARED", REPO.parent / "shared"))
 DEFAULT_CFG = """\
 % the default radar of DESIGN section 5
 channelCfg 1 1 0
