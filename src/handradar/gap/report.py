@@ -1,0 +1,95 @@
+"""The gap report ``handradar.gap_report/1`` (DESIGN section 8): structure and validation."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from handradar.atomic import atomic_write_text
+
+FORMAT = "handradar.gap_report/1"
+FACTORS = ("gesture", "angle_deg", "hands", "occlusion", "subject")
+
+
+class ReportError(ValueError):
+    """A gap report that does not follow the contract."""
+
+
+def _number(obj: dict, key: str, where: str) -> float:
+    v = obj.get(key)
+    if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+        raise ReportError(f"{where}.{key} must be a finite number, found {v!r}")
+    return float(v)
+
+
+def _scores(obj: object, where: str) -> None:
+    if not isinstance(obj, dict):
+        raise ReportError(f"{where} must be an object")
+    _number(obj, "ssim", where)
+    _number(obj, "mse", where)
+
+
+def validate_report(report: dict, *, n_doppler: int = 64, n_columns: int = 32) -> None:
+    """Raise ReportError unless ``report`` follows the contract exactly (keys, types, sorting)."""
+    if report.get("format") != FORMAT:
+        raise ReportError(f"format must be {FORMAT!r}, found {report.get('format')!r}")
+    for k in ("n_calibration", "n_evaluation"):
+        if not isinstance(report.get(k), int) or report[k] < 1:
+            raise ReportError(f"{k} must be a positive integer, found {report.get(k)!r}")
+    _scores(report.get("baseline"), "baseline")
+    where = report.get("where")
+    if not isinstance(where, dict):
+        raise ReportError("where must be an object")
+    for key, n in (("doppler_profile", n_doppler), ("time_profile", n_columns)):
+        prof = where.get(key)
+        if not isinstance(prof, list) or len(prof) != n or not all(isinstance(v, (int, float)) for v in prof):
+            raise ReportError(f"where.{key} must be a list of {n} numbers")
+    by = where.get("by_factor")
+    if not isinstance(by, dict) or set(by) != set(FACTORS):
+        raise ReportError(f"where.by_factor must have exactly the keys {FACTORS}, found {sorted(by or {})}")
+    for factor, levels in by.items():
+        if not isinstance(levels, dict):
+            raise ReportError(f"where.by_factor.{factor} must be an object")
+        for level, v in levels.items():
+            _number(v, "ssim", f"where.by_factor.{factor}.{level}")
+            if not isinstance(v.get("n"), int):
+                raise ReportError(f"where.by_factor.{factor}.{level}.n must be an integer")
+    rp = where.get("reflection_points")
+    if not isinstance(rp, dict) or not all(isinstance(v, (int, float)) for v in rp.values()):
+        raise ReportError("where.reflection_points must map reflection-point names to numbers")
+    cands = report.get("candidates")
+    if not isinstance(cands, list):
+        raise ReportError("candidates must be a list")
+    names = []
+    for i, c in enumerate(cands):
+        w = f"candidates[{i}]"
+        if not isinstance(c, dict) or not isinstance(c.get("effect"), str) or not isinstance(c.get("params"), dict):
+            raise ReportError(f"{w} needs 'effect' (string) and 'params' (object)")
+        _scores(c, w)
+        _number(c, "gap_closed", w)
+        ci = c.get("ci95")
+        if not isinstance(ci, list) or len(ci) != 2 or not ci[0] <= ci[1]:
+            raise ReportError(f"{w}.ci95 must be [low, high] with low <= high, found {ci!r}")
+        names.append(c["effect"])
+    if len(set(names)) != len(names):
+        raise ReportError(f"candidates must name each effect once, found {names}")
+    closed = [c["gap_closed"] for c in cands]
+    if closed != sorted(closed, reverse=True):
+        raise ReportError("candidates must be sorted by gap_closed, largest first")
+    cause = report.get("cause")
+    if cause != "none" and cause not in names:
+        raise ReportError(f"cause must be 'none' or a candidate's effect, found {cause!r}")
+    after = report.get("after")
+    _scores(after, "after")
+    _number(after, "gap_closed", "after")
+    if not isinstance(after.get("effects"), list) or not all(e in names for e in after["effects"]):
+        raise ReportError("after.effects must list candidate effects")
+
+
+def write_report(path: str | Path, report: dict, *, n_doppler: int = 64, n_columns: int = 32) -> Path:
+    """Validate and write ``gap_report.json`` atomically (nothing is written if invalid)."""
+    validate_report(report, n_doppler=n_doppler, n_columns=n_columns)
+    path = Path(path)
+    atomic_write_text(path, json.dumps(report, indent=1) + "\n")
+    return path
