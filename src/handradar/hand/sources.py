@@ -70,8 +70,9 @@ def dhg_items(root: str | Path, *, n_classes: int = 14, trim: bool = True, up_ax
               fps: float = dhg.FPS, errors: list | None = None) -> Iterator[SourceItem]:
     """DHG-14/28 sequences over the radar; ``n_classes`` 14 (gesture) or 28 (gesture x fingers)."""
     names = dhg.classes(n_classes)
+    files = dhg.dhg_files(root)
     info = dhg.load_info(root, trim)
-    for path, key in dhg.dhg_files(root):
+    for path, key in files:
         def load(path=path, key=key) -> SourceItem:
             seq = dhg.read_listed(path, key, info, fps=fps, mirror=mirror)
             seq = place_in_radar(seq, up_axis=up_axis, centre_m=centre_m, yaw_deg=yaw_deg)

@@ -145,6 +145,7 @@ def iter_dhg(root: str | Path, *, n_classes: int = 14, trim: bool = True, fps: f
     (required then; a sequence missing from it is an error).
     """
     classes(n_classes)
+    files = dhg_files(root)
     info = load_info(root, trim)
-    for path, key in dhg_files(root):
+    for path, key in files:
         yield read_listed(path, key, info, fps=fps, hand=hand, mirror=mirror), key.label(n_classes), key
