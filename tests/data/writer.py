@@ -4,7 +4,8 @@ It follows DESIGN section 4 literally and uses none of handradar's own writers o
 radar.cfg as text, adc_data.bin packed by hand (I(n) I(n+1) Q(n) Q(n+1), RX-major), leap.jsonl
 lines and meta.json with the json module. The scene is a rigid right hand, palm down over the
 radar, whose centre moves straight along boresight at a known velocity; the radar sees one point
-reflector at the hand centre.
+reflector at the hand centre. The hand holds still, moves at constant velocity for 1.6 s (one
+spectrogram window), then holds still again.
 """
 
 from __future__ import annotations
@@ -70,8 +71,9 @@ class Scene:
     occlusion: bool = False
     repetition: int = 1
     n_frames: int = 24
-    z0_m: float = 0.50  # hand centre height at t = 0
+    z0_m: float = 0.50  # hand centre height before the motion
     velocity_m_s: float = -0.15  # along boresight; negative approaches the radar
+    move_span_s: tuple[float, float] = (0.6, 2.2)  # still before and after: the motion fills frames 6..21
     amplitude: float = 3000.0
     radar_start_us: int = 2_000_000
     leap_rate_hz: float = 100.0
@@ -79,7 +81,9 @@ class Scene:
     extra_meta: dict = field(default_factory=dict)
 
     def centre(self, t: np.ndarray) -> np.ndarray:
-        return np.stack([np.zeros_like(t), np.zeros_like(t), self.z0_m + self.velocity_m_s * t], axis=-1)
+        a, b = self.move_span_s
+        z = self.z0_m + self.velocity_m_s * (np.clip(t, a, b) - a)
+        return np.stack([np.zeros_like(t), np.zeros_like(t), z], axis=-1)
 
     def joints(self, t: np.ndarray) -> np.ndarray:
         """(len(t), 21, 3) radar-frame joints; the template's hand centre rides on ``centre(t)``."""

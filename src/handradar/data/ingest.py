@@ -78,8 +78,8 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
                                                             "recording's; ingest one configuration per dataset")
                 try:
                     ex = recording_example(rec, chain, skeleton_rate_hz)
-                except ValueError as exc:  # e.g. a capture shorter than one spectrogram window
-                    raise FormatError(folder, str(exc)) from None
+                except ValueError as exc:  # a capture shorter than one spectrogram window, a gate beyond range
+                    raise FormatError(folder / "adc_data.bin", str(exc)) from None
             except HandradarError as exc:
                 if strict:
                     raise
