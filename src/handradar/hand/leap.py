@@ -54,6 +54,29 @@ def _hand_id(path: Path, lineno: int, what: str, value: object) -> int | str:
     return value
 
 
+_NUMBER = (int, float)  # exact types: json gives bool for true/false, which must not pass as a number
+
+
+def _joint_block(path: Path, lineno: int, slot: int, raw: list[object]) -> np.ndarray:
+    """21 raw JSON values (wrist, then mcp/pip/dip/btip of fingers 0..4) -> (21, 3) float64.
+
+    Fast path: one type sweep and one numpy conversion; anything unusual falls back to checking
+    vector by vector, which names the offending field.
+    """
+    if all(type(v) is list and len(v) == 3 for v in raw) and all(type(x) in _NUMBER for v in raw for x in v):
+        try:
+            block = np.array(raw, dtype=np.float64)
+        except OverflowError:  # an integer beyond float range
+            block = None
+        if block is not None and np.isfinite(block).all():
+            return block
+    for k, value in enumerate(raw):
+        what = (f"{HANDS[slot]} hand wrist" if k == 0
+                else f"{HANDS[slot]} finger {(k - 1) // 4} {LEAP_JOINT_FIELDS[(k - 1) % 4]}")
+        _vec3(path, lineno, what, value)
+    raise AssertionError("unreachable: a vector failed the fast check but passed the slow one")
+
+
 def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.ndarray, np.ndarray]:
     """One frame -> (timestamp_us, joints (2, 21, 3) Leap mm, tracked (2,))."""
     if not isinstance(obj, dict):
@@ -68,6 +91,7 @@ def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.nd
         raise FormatError(path, "'hands' and 'pointables' must be lists", line=lineno)
     joints = np.zeros((2, N_JOINTS, 3), dtype=np.float64)
     tracked = np.zeros(2, dtype=bool)
+    raw: list[list[object]] = [[None] * N_JOINTS, [None] * N_JOINTS]  # JSON values, validated per hand below
     slot_of_id: dict[object, int] = {}
     for hand in hands:
         if not isinstance(hand, dict):
@@ -83,10 +107,10 @@ def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.nd
         hid = _hand_id(path, lineno, f"{kind} hand 'id'", hand["id"])
         if "wrist" not in hand:
             raise FormatError(path, f"{kind} hand (id {hid!r}) has no 'wrist'", line=lineno)
-        joints[slot, 0] = _vec3(path, lineno, f"{kind} hand wrist", hand["wrist"])
+        raw[slot][0] = hand["wrist"]
         tracked[slot] = True
         slot_of_id[hid] = slot
-    found = np.zeros((2, 5), dtype=bool)
+    found = [[False] * 5, [False] * 5]
     for p in pointables:
         if not isinstance(p, dict):
             raise FormatError(path, "each pointable must be a JSON object", line=lineno)
@@ -94,20 +118,21 @@ def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.nd
         if slot is None:
             continue  # pointable of an ignored or unknown hand
         f = p.get("type")
-        if not isinstance(f, int) or isinstance(f, bool) or not 0 <= f <= 4:
+        if type(f) is not int or not 0 <= f <= 4:
             raise FormatError(path, f"pointable 'type' must be 0..4 (thumb..pinky), found {f!r:.40}", line=lineno)
-        if found[slot, f]:
+        if found[slot][f]:
             raise FormatError(path, f"{HANDS[slot]} hand has two pointables of type {f}", line=lineno)
         for j, key in enumerate(LEAP_JOINT_FIELDS):
             if key not in p:
                 raise FormatError(path, f"{HANDS[slot]} hand finger {f} has no '{key}'", line=lineno)
-            joints[slot, 1 + 4 * f + j] = _vec3(path, lineno, f"{HANDS[slot]} finger {f} {key}", p[key])
-        found[slot, f] = True
+            raw[slot][1 + 4 * f + j] = p[key]
+        found[slot][f] = True
     for slot in np.flatnonzero(tracked):
-        if not found[slot].all():
-            missing = [int(f) for f in np.flatnonzero(~found[slot])]
+        if not all(found[slot]):
+            missing = [f for f in range(5) if not found[slot][f]]
             raise FormatError(path, f"{HANDS[slot]} hand is tracked but finger(s) {missing} have no pointable "
                                     "(expected all five, types 0..4)", line=lineno)
+        joints[slot] = _joint_block(path, lineno, int(slot), raw[slot])
     return float(ts), joints, tracked
 
 
