@@ -90,6 +90,9 @@ def test_meta_file_errors(tmp_path):
     path.write_text("[" * 100000)
     with pytest.raises(FormatError, match="meta.json"):
         read_meta(tmp_path)
+    path.write_text('{"repetition": ' + "9" * 5000 + "}")
+    with pytest.raises(FormatError, match="invalid JSON"):
+        read_meta(tmp_path)
     path.write_text("[]")
     with pytest.raises(FormatError, match="expected a JSON object, found list"):
         read_meta(tmp_path)

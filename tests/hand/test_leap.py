@@ -173,6 +173,7 @@ def test_malformed_lines(tmp_path):
     f["pointables"][1]["type"] = 0
     _expect(tmp_path, [json.dumps(f)], "two pointables of type 0")
     _expect(tmp_path, [FRAME_2], "expected at least 2 frames, found 1")
+    _expect(tmp_path, [FRAME_2.replace("1011000", "1" * 5000)], "invalid JSON", "4300", line=1)
     path = tmp_path / "leap.jsonl"
     path.write_bytes(FRAME_2.encode() + b"\n\xff\xfe\n")
     with pytest.raises(FormatError, match=r"leap.jsonl:2: not UTF-8"):

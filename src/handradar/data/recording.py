@@ -96,7 +96,8 @@ def parse_meta(obj: object, path: str | Path = "meta.json") -> RecordingMeta:
     occlusion = _require(path, obj, "occlusion", (bool,), "true or false")
     repetition = _require(path, obj, "repetition", (int,), "an integer")
     if not -2**62 < repetition < 2**62:  # stored as int64 in datasets
-        raise FormatError(path, f"field 'repetition' is out of range, found {repetition:.3g}")
+        raise FormatError(path, f"field 'repetition' is out of range: expected |repetition| < 2**62, found an "
+                                f"integer of {repetition.bit_length()} bits")
     start = _require_number(path, obj, "radar_start_us", "microseconds on the Leap clock")
     m = leap_matrix(_require(path, obj, "leap_to_radar", (list,), "a 4x4 row-major matrix"), path)
     return RecordingMeta(gesture=str(gesture), subject=str(subject), angle_deg=angle, hands=int(hands),
@@ -113,6 +114,8 @@ def _read_json(path: Path) -> object:
         raise FormatError(path, "not UTF-8 text") from None
     except json.JSONDecodeError as exc:
         raise FormatError(path, f"invalid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
+    except ValueError as exc:  # e.g. an integer literal beyond Python's 4300-digit conversion limit
+        raise FormatError(path, f"invalid JSON ({exc})") from None
     except RecursionError:
         raise FormatError(path, "JSON nested too deeply") from None
 

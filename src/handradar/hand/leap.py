@@ -176,6 +176,8 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
                 obj = json.loads(line)
             except json.JSONDecodeError as exc:
                 raise FormatError(path, f"invalid JSON ({exc.msg} at column {exc.colno})", line=lineno) from None
+            except ValueError as exc:  # e.g. an integer literal beyond Python's 4300-digit conversion limit
+                raise FormatError(path, f"invalid JSON ({exc})", line=lineno) from None
             except RecursionError:
                 raise FormatError(path, "JSON nested too deeply", line=lineno) from None
             ts, joints, tracked = parse_leap_frame(obj, path, lineno)
