@@ -174,6 +174,8 @@ def test_malformed_lines(tmp_path):
     _expect(tmp_path, [json.dumps(f)], "two pointables of type 0")
     _expect(tmp_path, [FRAME_2], "expected at least 2 frames, found 1")
     _expect(tmp_path, [FRAME_2.replace("1011000", "1" * 5000)], "invalid JSON", "4300", line=1)
+    _expect(tmp_path, [FRAME_2, json.dumps(_frame(timestamp=2000000)).replace("[29, 220, -185]", "[1e300, 0, 0]")],
+            "frame 2 are 1e+297 m from the radar", "expected a hand within metres")
     path = tmp_path / "leap.jsonl"
     path.write_bytes(FRAME_2.encode() + b"\n\xff\xfe\n")
     with pytest.raises(FormatError, match=r"leap.jsonl:2: not UTF-8"):

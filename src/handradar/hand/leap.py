@@ -190,8 +190,14 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
         raise FormatError(path, f"expected at least 2 frames, found {len(stamps)}")
     joints_mm = np.stack(frames)
     radar = joints_mm @ m[:3, :3].T + m[:3, 3]
+    mask = np.stack(masks)
+    too_big = ~(np.abs(radar) < 1e6).all(axis=(-2, -1)) & mask  # metres; float32 would overflow far beyond
+    if too_big.any():
+        t = int(np.argmax(too_big.any(axis=1)))
+        raise FormatError(path, f"joint coordinates of frame {t + 1} are {np.abs(radar[t]).max():.3g} m from the "
+                                "radar after leap_to_radar; expected a hand within metres")
     times = (np.asarray(stamps) - float(radar_start_us)) * 1e-6
-    return HandSequence(radar.astype(np.float32), times, np.stack(masks), source=str(path))
+    return HandSequence(radar.astype(np.float32), times, mask, source=str(path))
 
 
 def leap_frames_from_sequence(seq: HandSequence, radar_to_leap: np.ndarray, radar_start_us: float,
