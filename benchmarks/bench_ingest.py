@@ -81,7 +81,7 @@ def run() -> list[Result]:
         meta = [read_meta(p) for p in folders]
         t_leap = best_time(lambda: [read_leap_jsonl(p / "leap.jsonl", np.asarray(m.leap_to_radar), m.radar_start_us)
                                     for p, m in zip(folders, meta)], repeat=5)
-        t_json = best_time(lambda: [[json.loads(line) for line in (p / "leap.jsonl").read_bytes().splitlines()]
+        t_json = best_time(lambda: [[json.loads(line) for line in (p / "leap.jsonl").read_text().splitlines()]
                                     for p in folders], repeat=5)
         t_read = best_time(lambda: [read_adc(p / "adc_data.bin", radar) for p in folders], repeat=5)
         recs = [load_recording(p) for p in folders]
