@@ -24,8 +24,12 @@ def main(cfg: DictConfig) -> None:
                          strict=cfg.strict, allow_truncated=cfg.allow_truncated,
                          coverage_tolerance_s=cfg.coverage_tolerance_s)
     except HandradarError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {exc}\nnothing written to {out}", file=sys.stderr)
         sys.exit(1)
+    except KeyboardInterrupt:
+        # the dataset is written through a temporary file that is removed on the way out
+        print(f"interrupted; nothing written to {out}", file=sys.stderr)
+        sys.exit(130)
     print(summary.report())
     print(out)
 

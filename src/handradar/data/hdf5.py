@@ -118,11 +118,17 @@ def read_attrs(path: str | Path) -> dict[str, object]:
         if missing:
             raise FormatError(path, f"missing dataset(s) {missing}")
         attrs["n"] = int(h5["labels"].shape[0])
-    attrs["classes"] = json.loads(attrs["classes"]) if "classes" in attrs else None
-    if "chain" in attrs:
-        c = json.loads(attrs["chain"])
-        c["gate_m"] = tuple(c["gate_m"])
-        attrs["chain"] = ChainConfig(**c)
+    try:
+        attrs["classes"] = json.loads(attrs["classes"]) if "classes" in attrs else None
+        if "chain" in attrs:
+            c = json.loads(attrs["chain"])
+            c["gate_m"] = tuple(c["gate_m"])
+            attrs["chain"] = ChainConfig(**c)
+    except (ValueError, TypeError, KeyError) as exc:
+        raise FormatError(path, f"attribute 'classes' or 'chain' is not valid ({exc})") from None
+    if attrs["classes"] is not None and (not isinstance(attrs["classes"], list)
+                                         or not all(isinstance(c, str) for c in attrs["classes"])):
+        raise FormatError(path, f"attribute 'classes' must be a JSON list of names, found {attrs['classes']!r:.60}")
     if "radar_cfg" in attrs:
         attrs["radar"] = RadarConfig.from_cfg_text(str(attrs["radar_cfg"]), f"{path}:radar_cfg")
     return attrs
@@ -151,13 +157,23 @@ def validate(path: str | Path) -> int:
             block = spec[lo:lo + 4096]
             if not np.all(np.isfinite(block)) or block.min(initial=0) < 0 or block.max(initial=0) > 1:
                 raise FormatError(path, f"spectrograms {lo}..{lo + len(block)} have values outside [0, 1]")
-        if h5["labels"].dtype != np.int64:
-            raise FormatError(path, f"labels must be int64, found {h5['labels'].dtype}")
+        labels = h5["labels"]
+        if labels.dtype != np.int64 or labels.shape != (n,):
+            raise FormatError(path, f"labels must be ({n},) int64, found {labels.shape} {labels.dtype}")
+        classes = attrs["classes"]
+        if classes is not None and n:
+            lo, hi = int(labels[()].min()), int(labels[()].max())
+            if lo < 0 or hi >= len(classes):
+                raise FormatError(path, f"labels must index the {len(classes)} classes, found values {lo}..{hi}")
         sk = h5["skeletons"]
         if sk.ndim != 5 or sk.shape[0] != n or sk.shape[2:] != (2, 21, 3) or sk.dtype != np.float32:
             raise FormatError(path, f"skeletons must be (N, T, 2, 21, 3) float32, found {sk.shape} {sk.dtype}")
+        if "hand_mask" in h5 and h5["hand_mask"].shape != (n, sk.shape[1], 2):
+            raise FormatError(path, f"hand_mask must be ({n}, {sk.shape[1]}, 2), found {h5['hand_mask'].shape}")
+        if not isinstance(h5["meta"], h5py.Group):
+            raise FormatError(path, "'meta' must be a group of (N,) arrays")
         for k, ds in h5["meta"].items():
-            if ds.shape != (n,):
+            if not isinstance(ds, h5py.Dataset) or ds.shape != (n,):
                 raise FormatError(path, f"meta/{k} must have shape ({n},), found {ds.shape}")
         for k in ("config_hash", "code_version"):
             if k not in h5.attrs:

@@ -22,15 +22,22 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class IngestSummary:
+    """What an ingest run did: recordings found, written, and skipped with their reasons."""
+
     found: int = 0
     written: int = 0
     skipped: list[tuple[str, str]] = field(default_factory=list)  # (recording, reason)
+    by_file: Counter = field(default_factory=Counter)  # failing file name (radar.cfg, ...) -> count
+
+    def skip(self, name: str, exc: Exception) -> None:
+        self.skipped.append((name, str(exc)))
+        path = getattr(exc, "path", None)
+        self.by_file[path.name if path is not None else type(exc).__name__] += 1
 
     def report(self) -> str:
         lines = [f"ingested {self.written} of {self.found} recordings; skipped {len(self.skipped)}"]
-        kinds = Counter(reason.split(":", 1)[-1].split("(")[0].strip()[:70] for _, reason in self.skipped)
-        for kind, n in kinds.most_common():
-            lines.append(f"  {n:4d} x {kind}")
+        if self.by_file:
+            lines.append("  skipped by failing file: " + ", ".join(f"{k} {n}" for k, n in self.by_file.most_common()))
         for name, reason in self.skipped[:20]:
             lines.append(f"  skipped {name}: {reason}")
         if len(self.skipped) > 20:
@@ -46,10 +53,20 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
     strict: raise at the first bad recording (nothing is written). Otherwise bad recordings are
     skipped and listed in the summary. All recordings must share one radar configuration.
     """
+    out = Path(out)
+    if out.is_dir():
+        raise FormatError(out, "the output path is a directory; expected a file name such as data.h5")
     folders = find_recordings(root)
     summary = IngestSummary(found=len(folders))
     if not folders:
         raise FormatError(root, "no recordings found (no folder with a meta.json)")
+    root = Path(root)
+
+    def name_of(folder: Path) -> str:
+        """Recording name stored in the dataset: its path under ``root`` (unique, unlike the leaf name)."""
+        rel = folder.relative_to(root).as_posix()
+        return rel if rel != "." else folder.name
+
     with contextlib.ExitStack() as stack:
         writer = radar = None
         for folder in tqdm(folders, desc="ingest", unit="rec", disable=not progress):
@@ -59,11 +76,14 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
                 if radar is not None and rec.radar != radar:
                     raise FormatError(folder / "radar.cfg", "radar configuration differs from the first "
                                                             "recording's; ingest one configuration per dataset")
-                ex = recording_example(rec, chain, skeleton_rate_hz)
-            except (HandradarError, ValueError) as exc:
+                try:
+                    ex = recording_example(rec, chain, skeleton_rate_hz)
+                except ValueError as exc:  # a capture shorter than one spectrogram window, a gate beyond range
+                    raise FormatError(folder / "adc_data.bin", str(exc)) from None
+            except HandradarError as exc:
                 if strict:
                     raise
-                summary.skipped.append((folder.name, str(exc)))
+                summary.skip(name_of(folder), exc)
                 log.warning("skipping %s: %s", folder, exc)
                 continue
             if writer is None:
@@ -73,7 +93,7 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
                     out, classes=GESTURES, radar=radar, chain=chain, skeleton_rate_hz=skeleton_rate_hz,
                     n_steps=n_steps, config_hash=config_hash(radar, chain, skeleton_rate_hz, "ingest")))
             labels = rec.meta.labels()
-            labels["recording"] = rec.name
+            labels["recording"] = name_of(folder)
             writer.append(ex.spectrogram, rec.meta.label, ex.skeleton.positions, ex.skeleton.mask,
                           ex.window_start_s, labels)
             summary.written += 1

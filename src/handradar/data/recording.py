@@ -9,7 +9,6 @@ only evaluation code may read it, through :func:`read_truth`.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import numpy as np
 
 from handradar.atomic import atomic_write_text
 from handradar.errors import FormatError
-from handradar.hand.leap import leap_matrix, read_leap_jsonl
+from handradar.hand.leap import finite_number, leap_matrix, read_leap_jsonl
 from handradar.hand.skeleton import HandSequence
 from handradar.radar.config import RadarConfig
 from handradar.radar.dca1000 import read_adc
@@ -66,12 +65,18 @@ def _require(path: Path, obj: dict, key: str, kinds: tuple[type, ...], what: str
     value = obj[key]
     if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
         raise FormatError(path, f"field '{key}' must be {what}, found {value!r:.60}")
-    if isinstance(value, float) and not math.isfinite(value):
-        raise FormatError(path, f"field '{key}' must be finite, found {value!r}")
+    return value
+
+
+def _require_number(path: Path, obj: dict, key: str, what: str) -> float:
+    value = finite_number(_require(path, obj, key, (int, float), what))
+    if value is None:
+        raise FormatError(path, f"field '{key}' must be a finite number ({what}), found {obj[key]!r:.60}")
     return value
 
 
 def parse_meta(obj: object, path: str | Path = "meta.json") -> RecordingMeta:
+    """Validate a decoded meta.json; FormatError names the file, the field and what was expected."""
     path = Path(path)
     if not isinstance(obj, dict):
         raise FormatError(path, f"expected a JSON object, found {type(obj).__name__}")
@@ -82,16 +87,21 @@ def parse_meta(obj: object, path: str | Path = "meta.json") -> RecordingMeta:
     if gesture not in GESTURES:
         raise FormatError(path, f"unknown gesture {gesture!r:.60}; expected one of {', '.join(GESTURES)}")
     subject = _require(path, obj, "subject", (str, int), "a subject id")
-    angle = _require(path, obj, "angle_deg", (int, float), "a number of degrees")
+    if isinstance(subject, str) and not subject.strip():
+        raise FormatError(path, "field 'subject' must be a non-empty subject id, found ''")
+    angle = _require_number(path, obj, "angle_deg", "degrees")
     hands = _require(path, obj, "hands", (int,), "1 or 2")
     if hands not in (1, 2):
-        raise FormatError(path, f"field 'hands' must be 1 or 2, found {hands!r}")
+        raise FormatError(path, f"field 'hands' must be 1 or 2, found {hands!r:.40}")
     occlusion = _require(path, obj, "occlusion", (bool,), "true or false")
     repetition = _require(path, obj, "repetition", (int,), "an integer")
-    start = _require(path, obj, "radar_start_us", (int, float), "microseconds on the Leap clock")
+    if not -2**62 < repetition < 2**62:  # stored as int64 in datasets
+        raise FormatError(path, f"field 'repetition' is out of range: expected |repetition| < 2**62, found an "
+                                f"integer of {repetition.bit_length()} bits")
+    start = _require_number(path, obj, "radar_start_us", "microseconds on the Leap clock")
     m = leap_matrix(_require(path, obj, "leap_to_radar", (list,), "a 4x4 row-major matrix"), path)
-    return RecordingMeta(gesture=str(gesture), subject=str(subject), angle_deg=float(angle), hands=int(hands),
-                         occlusion=bool(occlusion), repetition=int(repetition), radar_start_us=float(start),
+    return RecordingMeta(gesture=str(gesture), subject=str(subject), angle_deg=angle, hands=int(hands),
+                         occlusion=bool(occlusion), repetition=int(repetition), radar_start_us=start,
                          leap_to_radar=tuple(tuple(float(v) for v in row) for row in m))
 
 
@@ -104,6 +114,10 @@ def _read_json(path: Path) -> object:
         raise FormatError(path, "not UTF-8 text") from None
     except json.JSONDecodeError as exc:
         raise FormatError(path, f"invalid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
+    except ValueError as exc:  # e.g. an integer literal beyond Python's 4300-digit conversion limit
+        raise FormatError(path, f"invalid JSON ({exc})") from None
+    except RecursionError:
+        raise FormatError(path, "JSON nested too deeply") from None
 
 
 def read_meta(folder: str | Path) -> RecordingMeta:
@@ -161,8 +175,9 @@ def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
     folder = check_folder(folder)
     meta = read_meta(folder)
     radar = RadarConfig.from_file(folder / "radar.cfg")
-    adc = read_adc(folder / "adc_data.bin", radar, allow_truncated=allow_truncated)
+    # the small files first: a bad leap.jsonl is found before megabytes of ADC are read
     skeleton = read_leap_jsonl(folder / "leap.jsonl", np.asarray(meta.leap_to_radar), meta.radar_start_us)
+    adc = read_adc(folder / "adc_data.bin", radar, allow_truncated=allow_truncated)
     end = adc.shape[0] * radar.frame_period_s
     t0, t1 = float(skeleton.times[0]), float(skeleton.times[-1])
     if t0 > coverage_tolerance_s or t1 < end - coverage_tolerance_s:

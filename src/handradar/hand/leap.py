@@ -24,28 +24,74 @@ from handradar.hand.skeleton import HANDS, N_JOINTS, HandSequence
 LEAP_JOINT_FIELDS = ("mcpPosition", "pipPosition", "dipPosition", "btipPosition")
 
 
+def finite_number(value: object) -> float | None:
+    """``value`` as a finite float, or None if it is not a JSON number (bools excluded) or not finite.
+
+    JSON integers can be arbitrarily large; converting one beyond float range raises OverflowError,
+    which is caught here so that no reader lets it escape.
+    """
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        return None
+    try:
+        out = float(value)
+    except OverflowError:
+        return None
+    return out if math.isfinite(out) else None
+
+
 def _vec3(path: Path, lineno: int, what: str, value: object) -> list[float]:
-    if (not isinstance(value, list) or len(value) != 3
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+    if not isinstance(value, list) or len(value) != 3:
         raise FormatError(path, f"{what}: expected [x, y, z] numbers, found {value!r:.80}", line=lineno)
-    if not all(math.isfinite(v) for v in value):
-        raise FormatError(path, f"{what}: NaN or infinite coordinate {value!r}", line=lineno)
-    return [float(v) for v in value]
+    out = [finite_number(v) for v in value]
+    if any(v is None for v in out):
+        raise FormatError(path, f"{what}: expected three finite numbers, found {value!r:.80}", line=lineno)
+    return out  # type: ignore[return-value]
+
+
+def _hand_id(path: Path, lineno: int, what: str, value: object) -> int | str:
+    if isinstance(value, bool) or not isinstance(value, (int, str)):
+        raise FormatError(path, f"{what} must be an integer id, found {value!r:.40}", line=lineno)
+    return value
+
+
+_NUMBER = (int, float)  # exact types: json gives bool for true/false, which must not pass as a number
+
+
+def _joint_block(path: Path, lineno: int, slot: int, raw: list[object]) -> np.ndarray:
+    """21 raw JSON values (wrist, then mcp/pip/dip/btip of fingers 0..4) -> (21, 3) float64.
+
+    Fast path: one type sweep and one numpy conversion; anything unusual falls back to checking
+    vector by vector, which names the offending field.
+    """
+    if all(type(v) is list and len(v) == 3 for v in raw) and all(type(x) in _NUMBER for v in raw for x in v):
+        try:
+            block = np.array(raw, dtype=np.float64)
+        except OverflowError:  # an integer beyond float range
+            block = None
+        if block is not None and np.isfinite(block).all():
+            return block
+    for k, value in enumerate(raw):
+        what = (f"{HANDS[slot]} hand wrist" if k == 0
+                else f"{HANDS[slot]} finger {(k - 1) // 4} {LEAP_JOINT_FIELDS[(k - 1) % 4]}")
+        _vec3(path, lineno, what, value)
+    raise AssertionError("unreachable: a vector failed the fast check but passed the slow one")
 
 
 def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.ndarray, np.ndarray]:
     """One frame -> (timestamp_us, joints (2, 21, 3) Leap mm, tracked (2,))."""
     if not isinstance(obj, dict):
         raise FormatError(path, f"expected a JSON object per line, found {type(obj).__name__}", line=lineno)
-    ts = obj.get("timestamp")
-    if not isinstance(ts, (int, float)) or isinstance(ts, bool) or not math.isfinite(ts):
-        raise FormatError(path, f"'timestamp' must be a number of microseconds, found {ts!r:.40}", line=lineno)
+    ts = finite_number(obj.get("timestamp"))
+    if ts is None:
+        raise FormatError(path, f"'timestamp' must be a finite number of microseconds, found "
+                                f"{obj.get('timestamp', '<missing>')!r:.40}", line=lineno)
     hands = obj.get("hands", [])
     pointables = obj.get("pointables", [])
     if not isinstance(hands, list) or not isinstance(pointables, list):
         raise FormatError(path, "'hands' and 'pointables' must be lists", line=lineno)
     joints = np.zeros((2, N_JOINTS, 3), dtype=np.float64)
     tracked = np.zeros(2, dtype=bool)
+    raw: list[list[object]] = [[None] * N_JOINTS, [None] * N_JOINTS]  # JSON values, validated per hand below
     slot_of_id: dict[object, int] = {}
     for hand in hands:
         if not isinstance(hand, dict):
@@ -56,70 +102,84 @@ def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.nd
         slot = HANDS.index(kind)
         if tracked[slot]:
             continue  # a second hand of the same side: keep the first, as Leap's own API does
+        if "id" not in hand:
+            raise FormatError(path, f"{kind} hand has no 'id' (pointables refer to their hand by it)", line=lineno)
+        hid = _hand_id(path, lineno, f"{kind} hand 'id'", hand["id"])
         if "wrist" not in hand:
-            raise FormatError(path, f"{kind} hand (id {hand.get('id')!r}) has no 'wrist'", line=lineno)
-        joints[slot, 0] = _vec3(path, lineno, f"{kind} hand wrist", hand["wrist"])
+            raise FormatError(path, f"{kind} hand (id {hid!r}) has no 'wrist'", line=lineno)
+        raw[slot][0] = hand["wrist"]
         tracked[slot] = True
-        slot_of_id[hand.get("id")] = slot
-    found = np.zeros((2, 5), dtype=bool)
+        slot_of_id[hid] = slot
+    found = [[False] * 5, [False] * 5]
     for p in pointables:
         if not isinstance(p, dict):
             raise FormatError(path, "each pointable must be a JSON object", line=lineno)
-        slot = slot_of_id.get(p.get("handId"))
+        slot = slot_of_id.get(_hand_id(path, lineno, "pointable 'handId'", p.get("handId")))
         if slot is None:
             continue  # pointable of an ignored or unknown hand
         f = p.get("type")
-        if not isinstance(f, int) or isinstance(f, bool) or not 0 <= f <= 4:
+        if type(f) is not int or not 0 <= f <= 4:
             raise FormatError(path, f"pointable 'type' must be 0..4 (thumb..pinky), found {f!r:.40}", line=lineno)
+        if found[slot][f]:
+            raise FormatError(path, f"{HANDS[slot]} hand has two pointables of type {f}", line=lineno)
         for j, key in enumerate(LEAP_JOINT_FIELDS):
             if key not in p:
                 raise FormatError(path, f"{HANDS[slot]} hand finger {f} has no '{key}'", line=lineno)
-            joints[slot, 1 + 4 * f + j] = _vec3(path, lineno, f"{HANDS[slot]} finger {f} {key}", p[key])
-        found[slot, f] = True
+            raw[slot][1 + 4 * f + j] = p[key]
+        found[slot][f] = True
     for slot in np.flatnonzero(tracked):
-        if not found[slot].all():
-            missing = [int(f) for f in np.flatnonzero(~found[slot])]
+        if not all(found[slot]):
+            missing = [f for f in range(5) if not found[slot][f]]
             raise FormatError(path, f"{HANDS[slot]} hand is tracked but finger(s) {missing} have no pointable "
                                     "(expected all five, types 0..4)", line=lineno)
+        joints[slot] = _joint_block(path, lineno, int(slot), raw[slot])
     return float(ts), joints, tracked
 
 
 def leap_matrix(value: object, source: str | Path) -> np.ndarray:
     """Validate a 4x4 row-major Leap-mm -> radar-m matrix with last row [0, 0, 0, 1]."""
-    try:
-        m = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise FormatError(source, f"leap_to_radar must be a 4x4 matrix of numbers, found {value!r:.80}") from None
-    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-        raise FormatError(source, f"leap_to_radar must be a finite 4x4 matrix, found shape {m.shape}")
+    rows = value if isinstance(value, (list, tuple)) else None
+    if rows is None or len(rows) != 4 or not all(isinstance(r, (list, tuple)) and len(r) == 4 for r in rows):
+        raise FormatError(source, f"leap_to_radar must be a 4x4 row-major matrix (4 lists of 4 numbers), "
+                                  f"found {value!r:.80}")
+    numbers = [[finite_number(v) for v in r] for r in rows]
+    if any(v is None for r in numbers for v in r):
+        raise FormatError(source, f"leap_to_radar must hold 16 finite numbers, found {value!r:.80}")
+    m = np.asarray(numbers, dtype=np.float64)
     if not np.allclose(m[3], [0, 0, 0, 1]):
         raise FormatError(source, f"leap_to_radar last row must be [0, 0, 0, 1], found {m[3].tolist()}")
-    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
-        raise FormatError(source, "leap_to_radar is singular")
+    if not abs(np.linalg.det(m[:3, :3])) > 1e-12:
+        raise FormatError(source, "leap_to_radar is singular (its 3x3 part has determinant 0)")
     return m
 
 
-def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray, radar_start_us: float) -> HandSequence:
+def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_start_us: float) -> HandSequence:
     """Read ``leap.jsonl`` into a radar-frame HandSequence; time 0 is the start of radar frame 0."""
     path = Path(path)
-    m = leap_matrix(leap_to_radar, path)
+    m = leap_matrix(leap_to_radar.tolist() if isinstance(leap_to_radar, np.ndarray) else leap_to_radar, path)
     stamps: list[float] = []
     frames: list[np.ndarray] = []
     masks: list[np.ndarray] = []
     try:
-        fh = path.open("r", encoding="utf-8")
+        fh = path.open("rb")  # bytes: a decoding error is then reported with its line number
     except OSError as exc:
         raise FormatError(path, f"cannot read: {exc.strerror}") from None
     with fh:
-        for lineno, line in enumerate(fh, start=1):
+        for lineno, raw in enumerate(fh, start=1):
+            try:
+                line = raw.decode("utf-8")
+            except UnicodeDecodeError:
+                raise FormatError(path, "not UTF-8 text", line=lineno) from None
             if not line.strip():
                 continue
             try:
                 obj = json.loads(line)
             except json.JSONDecodeError as exc:
                 raise FormatError(path, f"invalid JSON ({exc.msg} at column {exc.colno})", line=lineno) from None
-            except UnicodeDecodeError:
-                raise FormatError(path, "not UTF-8 text", line=lineno) from None
+            except ValueError as exc:  # e.g. an integer literal beyond Python's 4300-digit conversion limit
+                raise FormatError(path, f"invalid JSON ({exc})", line=lineno) from None
+            except RecursionError:
+                raise FormatError(path, "JSON nested too deeply", line=lineno) from None
             ts, joints, tracked = parse_leap_frame(obj, path, lineno)
             if stamps and ts <= stamps[-1]:
                 raise FormatError(path, f"timestamps must increase: {ts:.0f} us follows {stamps[-1]:.0f} us", line=lineno)
@@ -130,8 +190,14 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray, radar_start_us:
         raise FormatError(path, f"expected at least 2 frames, found {len(stamps)}")
     joints_mm = np.stack(frames)
     radar = joints_mm @ m[:3, :3].T + m[:3, 3]
+    mask = np.stack(masks)
+    too_big = ~(np.abs(radar) < 1e6).all(axis=(-2, -1)) & mask  # metres; float32 would overflow far beyond
+    if too_big.any():
+        t = int(np.argmax(too_big.any(axis=1)))
+        raise FormatError(path, f"joint coordinates of frame {t + 1} are {np.abs(radar[t]).max():.3g} m from the "
+                                "radar after leap_to_radar; expected a hand within metres")
     times = (np.asarray(stamps) - float(radar_start_us)) * 1e-6
-    return HandSequence(radar.astype(np.float32), times, np.stack(masks), source=str(path))
+    return HandSequence(radar.astype(np.float32), times, mask, source=str(path))
 
 
 def leap_frames_from_sequence(seq: HandSequence, radar_to_leap: np.ndarray, radar_start_us: float,

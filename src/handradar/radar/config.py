@@ -293,21 +293,29 @@ def parse_cfg(text: str, source: str | Path = "<text>") -> RadarConfig:
     selects undefined chirps.
     """
     seen: dict[str, list[tuple[int, list[str]]]] = {}
+    near_miss: dict[str, tuple[int, str]] = {}  # mandatory command -> (line, misspelt form seen)
+    lower = {c.lower(): c for c in MANDATORY_COMMANDS}
     for lineno, raw in enumerate(text.splitlines(), start=1):
         line = raw.split("%", 1)[0].strip()
         if not line:
             continue
         cmd, *args = line.split()
         if cmd not in _ARITY:
-            continue  # unknown or irrelevant command (guiMonitor, cfarCfg, ...)
+            # unknown or irrelevant command (guiMonitor, cfarCfg, ...); remember case slips of a
+            # mandatory one so that "missing profileCfg" can point at "profilecfg" on line n
+            if cmd.lower() in lower:
+                near_miss.setdefault(lower[cmd.lower()], (lineno, cmd))
+            continue
         if len(args) < _ARITY[cmd]:
             raise FormatError(source, f"{cmd}: expected {_ARITY[cmd]} arguments, found {len(args)}", line=lineno)
         seen.setdefault(cmd, []).append((lineno, args))
 
     missing = [c for c in MANDATORY_COMMANDS if c not in seen]
     if missing:
+        hints = "".join(f"; line {near_miss[c][0]} has {near_miss[c][1]!r} (commands are case-sensitive)"
+                        for c in missing if c in near_miss)
         raise FormatError(source, f"missing mandatory command(s): {', '.join(missing)} "
-                                  f"(expected all of {', '.join(MANDATORY_COMMANDS)})")
+                                  f"(expected all of {', '.join(MANDATORY_COMMANDS)}){hints}")
     for cmd in ("channelCfg", "adcCfg", "profileCfg", "frameCfg"):
         if len(seen[cmd]) > 1:
             raise FormatError(source, f"expected exactly one {cmd}, found {len(seen[cmd])} "

@@ -67,9 +67,10 @@ def read_adc(path: str | Path, cfg: RadarConfig, *, allow_truncated: bool = Fals
 
 def quantise(adc: np.ndarray) -> tuple[np.ndarray, int]:
     """Round complex ADC counts to int16 I and Q; returns (I/Q int16 pair, clipped count)."""
-    parts = np.stack([adc.real, adc.imag], axis=0)
-    clipped = int(np.count_nonzero(np.abs(parts) > INT16_FULL_SCALE))
-    return np.clip(np.rint(parts), -INT16_FULL_SCALE - 1, INT16_FULL_SCALE).astype("<i2"), clipped
+    parts = np.rint(np.stack([adc.real, adc.imag], axis=0))
+    # int16 spans -32768..32767: -32768 is a valid count, not a clipped one
+    clipped = int(np.count_nonzero((parts > INT16_FULL_SCALE) | (parts < -INT16_FULL_SCALE - 1)))
+    return np.clip(parts, -INT16_FULL_SCALE - 1, INT16_FULL_SCALE).astype("<i2"), clipped
 
 
 def encode_adc(adc: np.ndarray, cfg: RadarConfig) -> bytes:

@@ -1,0 +1,105 @@
+"""SpectrogramDataModule: seeded stratified split, lazy HDF5 in DataLoader workers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import torch
+
+from handradar.data.datamodule import SpectrogramDataModule, stratified_split
+from handradar.data.hdf5 import open_writer, validate
+from handradar.data.recording import GESTURES
+
+COUNTS = {0: 40, 3: 20, 7: 10}  # uneven classes
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory, radar, chain) -> Path:
+    path = tmp_path_factory.mktemp("dm") / "d.h5"
+    rng = np.random.default_rng(0)
+    labels = np.concatenate([[c] * n for c, n in COUNTS.items()])
+    rng.shuffle(labels)
+    with open_writer(path, classes=GESTURES, radar=radar, chain=chain, skeleton_rate_hz=10.0, n_steps=16,
+                     config_hash="test") as w:
+        for i, c in enumerate(labels):
+            spec = np.full((64, 32), i / len(labels), dtype=np.float32)  # row i is recognisable by its value
+            skel = np.full((16, 2, 21, 3), i, dtype=np.float32)
+            w.append(spec, int(c), skel, np.ones((16, 2), bool), 0.0,
+                     {"gesture": GESTURES[c], "subject": f"s{i % 3}", "recording": f"r{i}"})
+    assert validate(path) == len(labels)
+    return path
+
+
+def _labels(path: Path) -> np.ndarray:
+    with h5py.File(path, "r") as h5:
+        return h5["labels"][()]
+
+
+def test_stratified_split_properties():
+    labels = np.array([0] * 40 + [1] * 20 + [2] * 10 + [3] * 3)
+    train, val, test = stratified_split(labels, (0.7, 0.15, 0.15), seed=1)
+    assert len(np.intersect1d(train, val)) == len(np.intersect1d(train, test)) == len(np.intersect1d(val, test)) == 0
+    assert np.array_equal(np.sort(np.concatenate([train, val, test])), np.arange(len(labels)))
+    for c, n in ((0, 40), (1, 20), (2, 10)):
+        assert (labels[train] == c).sum() == round(0.7 * n)
+        assert (labels[val] == c).sum() == round(0.85 * n) - round(0.7 * n)
+    again = stratified_split(labels, (0.7, 0.15, 0.15), seed=1)
+    other = stratified_split(labels, (0.7, 0.15, 0.15), seed=2)
+    assert all(np.array_equal(a, b) for a, b in zip((train, val, test), again))
+    assert not np.array_equal(train, other[0])
+    with pytest.raises(ValueError, match="sum to 1"):
+        stratified_split(labels, (0.5, 0.2), seed=0)
+
+
+def test_datamodule_split_is_seeded_and_stratified(dataset):
+    dm = SpectrogramDataModule(dataset, seed=3, batch_size=8)
+    dm.setup()
+    labels = _labels(dataset)
+    for c, n in COUNTS.items():
+        assert (labels[dm.indices["train"]] == c).sum() == round(0.7 * n)
+        assert (labels[dm.indices["test"]] == c).sum() == n - round(0.85 * n)
+    assert dm.num_classes == 10 and dm.classes == list(GESTURES)
+    same = SpectrogramDataModule(dataset, seed=3)
+    same.setup()
+    assert all(np.array_equal(dm.indices[k], same.indices[k]) for k in ("train", "val", "test"))
+
+
+def test_loaders_with_two_workers(dataset):
+    dm = SpectrogramDataModule(dataset, seed=0, batch_size=7, num_workers=2, with_skeleton=True)
+    labels = _labels(dataset)
+    for name, loader in (("train", dm.train_dataloader()), ("val", dm.val_dataloader()),
+                         ("test", dm.test_dataloader())):
+        seen = []
+        for batch in loader:
+            idx = batch["index"].numpy()
+            seen.append(idx)
+            assert batch["spectrogram"].shape[1:] == (1, 64, 32)
+            # each row comes back from its own place in the file
+            torch.testing.assert_close(batch["spectrogram"][:, 0, 0, 0], torch.as_tensor(idx / len(labels),
+                                                                                       dtype=torch.float32))
+            assert (batch["label"].numpy() == labels[idx]).all()
+            assert (batch["skeleton"][:, 0, 0, 0, 0].numpy() == idx).all() and batch["hand_mask"].all()
+        seen = np.concatenate(seen)
+        assert np.array_equal(np.sort(seen), dm.indices[name])  # every row exactly once
+        # the parent never holds an open handle that a fork could share
+        assert dm.datasets[name]._h5 is None
+    # the training order is shuffled, and the same for the same seed
+    first = np.concatenate([b["index"].numpy() for b in dm.train_dataloader()])
+    again = np.concatenate([b["index"].numpy() for b in SpectrogramDataModule(dataset, seed=0, batch_size=7)
+                            .train_dataloader()])
+    assert np.array_equal(first, again) and not np.array_equal(first, np.sort(first))
+
+
+def test_label_map_keeps_a_subset(dataset):
+    dm = SpectrogramDataModule(dataset, label_map={3: 0, 7: 1}, seed=0, batch_size=64)
+    dm.setup()
+    labels = _labels(dataset)
+    all_rows = np.concatenate([dm.indices[k] for k in ("train", "val", "test")])
+    assert sorted(all_rows.tolist()) == np.flatnonzero(np.isin(labels, [3, 7])).tolist()
+    assert dm.num_classes == 2
+    batch = next(iter(dm.train_dataloader()))
+    assert set(batch["label"].tolist()) <= {0, 1}
+    assert ((labels[batch["index"].numpy()] == 7) == (batch["label"].numpy() == 1)).all()
