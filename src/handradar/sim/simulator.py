@@ -23,7 +23,7 @@ Public API:
       .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
       .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
             network-independent: cache these (sim.cache) and train RadarWeightNet on them
-      .combine(slot_profiles, weights=None, *, times=None) -> (B, F, L, Ch, bins)
+      .combine(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, F, L, Ch, bins)
             weights (B, T, 38) positive at the skeleton steps (slot = hand * 19 + bone),
             upsampled linearly in time to the chirp times
       .spectrogram(signal) -> (B, doppler, columns) in [0, 1] (signal effects, then the chain)
@@ -143,11 +143,15 @@ class Simulator(nn.Module):
         return upsample_to_chirps(weights, self.step_times(weights.shape[1], times), self.chirp_times)
 
     def combine(self, slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, *,
-                times: torch.Tensor | None = None) -> torch.Tensor:
+                times: torch.Tensor | None = None, active: torch.Tensor | None = None,
+                scale: torch.Tensor | None = None) -> torch.Tensor:
         """Weighted sum of the slots (B, F, L, Ch, bins); weights (B, T, 38) at the skeleton steps
-        (``times`` as given to slot_profiles, before any clock offset)."""
+        (``times`` as given to slot_profiles, before any clock offset). slot_profiles may be the
+        complex tensor or the cache's float16 real view with its per-row ``scale`` (B,);
+        ``active`` (38,) skips slots that are zero in the whole batch."""
         w = None if weights is None else self.upsample(weights, times)
-        return combine_slots(slot_profiles, w, self.radar.n_rx)
+        out = combine_slots(slot_profiles, w, self.radar.n_rx, active)
+        return out if scale is None else out * scale.to(out.real.dtype).reshape(-1, 1, 1, 1, 1)
 
     def spectrogram(self, signal: torch.Tensor) -> torch.Tensor:
         """Summed signal -> signal-stage effects -> the shared chain -> (B, doppler, columns) in [0, 1]."""

@@ -20,8 +20,8 @@ Public API:
     window_chirp_times(radar, chain) -> np.ndarray (F, L, C) seconds from the window start
     scatterer_profiles(scat, times (T,) | (B, T), chirp_times (F, L, C), radar, chain, *,
                        tx_power_w, gain_tx_dbi, gain_rx_dbi) -> (B, 39, F, L, C * n_rx, bins) complex
-    combine_slots(slot_profiles (B, 39, F, L, Ch, bins), weights (B, 38, F, L, C) | None, n_rx)
-        -> (B, F, L, Ch, bins): sum_k w_k P_k + unweighted slot
+    combine_slots(slot_profiles (B, 39, F, L, Ch, bins) complex | (..., 2) real view, weights (B, 38, F, L, C)
+        | None, n_rx, active (38,) bool | None) -> (B, F, L, Ch, bins) complex: sum_k w_k P_k + unweighted slot
 """
 
 from __future__ import annotations
@@ -81,15 +81,32 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     return slots.reshape(bsz, f, l, c * radar.n_rx, N_ALL_SLOTS, -1).permute(0, 4, 1, 2, 3, 5)
 
 
-def combine_slots(slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, n_rx: int = 1) -> torch.Tensor:
-    """sum_k w_k(c) P_k(c, b) over the 38 bone slots, plus the unweighted slot.
+def combine_slots(slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, n_rx: int = 1,
+                  active: torch.Tensor | None = None) -> torch.Tensor:
+    """sum_k w_k(c) P_k(c, b) over the 38 bone slots, plus the unweighted slot -> (B, F, L, Ch, bins) complex.
 
-    slot_profiles (B, 39, F, L, Ch, bins) complex; weights (B, 38, F, L, C) real at chirp times
-    (C chirps per loop; each is repeated over the n_rx receivers of its chirp) or None (all 1).
+    slot_profiles: (B, 39, F, L, Ch, bins) complex, or its real view (..., 2) in any float dtype
+    (e.g. the float16 cache; converted one slot at a time). weights: (B, 38, F, L, C) real at the
+    chirp times (each chirp's value repeated over its n_rx receivers) or None (all 1).
+    active: optional (38,) bool, False for bone slots known to be zero in the whole batch (an
+    untracked hand), which are skipped. Accumulating slot by slot in place avoids a (B, 38, ...)
+    temporary: several times faster on a CPU.
     """
-    if weights is None:
-        return slot_profiles.sum(dim=1)
-    if n_rx > 1:
-        weights = weights.repeat_interleave(n_rx, dim=-1)
-    w = weights.to(slot_profiles.real.dtype)[..., None]
-    return (slot_profiles[:, :N_SLOTS] * w).sum(dim=1) + slot_profiles[:, N_SLOTS]
+    real = torch.view_as_real(slot_profiles) if slot_profiles.is_complex() else slot_profiles
+    acc_dtype = torch.float64 if real.dtype == torch.float64 else torch.float32
+    b, _, f, l, ch, nb, _ = real.shape
+    # (B, slots, chirps, bins * 2): one broadcast dimension for the weights keeps the loop fast
+    flat = real.reshape(b, real.shape[1], f * l * ch, nb * 2)
+    if weights is not None:
+        if n_rx > 1:
+            weights = weights.repeat_interleave(n_rx, dim=-1)
+        weights = weights.to(acc_dtype).reshape(b, N_SLOTS, f * l * ch, 1)
+    out = flat[:, N_SLOTS].to(acc_dtype).clone()
+    ks = range(N_SLOTS) if active is None else torch.nonzero(torch.as_tensor(active)).flatten().tolist()
+    for k in ks:
+        p = flat[:, k].to(acc_dtype)
+        if weights is None:
+            out.add_(p)
+        else:
+            out.addcmul_(p, weights[:, k])
+    return torch.view_as_complex(out.reshape(b, f, l, ch, nb, 2))
