@@ -9,8 +9,9 @@ simulator's scattering centre, radar at the origin):
     radial_velocity_m_s    d distance / dt, m/s, positive = receding
     radial_acceleration_m_s2  d^2 distance / dt^2, m/s^2
 
-Derivatives are central differences in time (numpy.gradient on the true step times); untracked
-steps hold the nearest tracked distance while differentiating and are zero in the output (all
+Derivatives are central differences in time (numpy.gradient on the true step times); across
+untracked steps the distance is interpolated linearly while differentiating (no spike at a gap)
+and those steps are zero in the output (all
 features of an untracked hand are 0). ``facing`` counts (the denominator of the occlusion
 fraction) come along.
 
@@ -98,14 +99,15 @@ class BoneFeatures:
         return np.divide(vis, self.facing, out=np.zeros(vis.shape, np.float32), where=self.facing > 0)
 
 
-def _hold_tracked(x: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Fill untracked steps (axis 0) with the nearest earlier tracked value (else the first later one)."""
-    t = np.arange(x.shape[0])[:, None, None]
-    m = np.broadcast_to(mask[..., None], x.shape)
-    last = np.maximum.accumulate(np.where(m, t, -1), axis=0)
-    nxt = np.flip(np.minimum.accumulate(np.flip(np.where(m, t, x.shape[0]), 0), axis=0), 0)
-    src = np.where(last >= 0, last, np.minimum(nxt, x.shape[0] - 1))
-    return np.take_along_axis(x, src, axis=0)
+def _fill_untracked(x: np.ndarray, mask: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """x (T, 2, 19) with untracked steps filled linearly in time from the tracked ones (ends held)."""
+    out = x.copy()
+    for h in range(x.shape[1]):
+        ok = mask[:, h]
+        if ok.any() and not ok.all():
+            for k in range(x.shape[2]):
+                out[~ok, h, k] = np.interp(times[~ok], times[ok], x[ok, h, k])
+    return out
 
 
 def bone_features(positions: np.ndarray, times: np.ndarray, mask: np.ndarray, wavelength_m: float,
@@ -124,8 +126,8 @@ def bone_features(positions: np.ndarray, times: np.ndarray, mask: np.ndarray, wa
     dist = np.linalg.norm(mid.numpy(), axis=-1)  # (T, 2, 19)
     m = mask[..., None] & np.ones(N_BONES, bool)
     if times.shape[0] >= 2 and mask.any():
-        held = _hold_tracked(dist, mask)
-        vel = np.gradient(held, times, axis=0)
+        filled = _fill_untracked(dist, mask, times)
+        vel = np.gradient(filled, times, axis=0)
         acc = np.gradient(vel, times, axis=0)
     else:
         vel = acc = np.zeros_like(dist)
