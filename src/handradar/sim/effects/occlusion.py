@@ -42,7 +42,9 @@ class Occlusion(Effect):
         frac = ctx.visibility if ctx.visibility is not None else visible_fraction(ctx.joints, ctx.mask, ctx.hand)
         b, t = frac.shape[:2]
         tr = self.value("transmission").to(frac.dtype)
-        amp = torch.sqrt((tr + (1.0 - tr) * frac.reshape(b, t, N_SLOTS)).clamp_min(1e-12))
+        power = tr + (1.0 - tr) * frac.reshape(b, t, N_SLOTS)
+        hidden = power <= 0
+        amp = torch.where(hidden, torch.zeros_like(power), torch.sqrt(torch.where(hidden, torch.ones_like(power), power)))
         factor = torch.ones_like(scat.gain)
         bone = (scat.owner >= 0) & (scat.owner < N_SLOTS)
         # every point owned by bone k (its multipath images included) takes bone k's factor
