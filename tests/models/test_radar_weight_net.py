@@ -14,7 +14,7 @@ from handradar.models.radar_weight_net import RadarWeightNet, enhanced_spectrogr
 from handradar.sim.scatterers import Scatterers
 from handradar.sim.simulator import Simulator
 from handradar.sim.synthesis import scatterer_profiles, window_chirp_times
-from tests.sim.helpers import window
+from handradar.sim.demo import window
 
 
 def steps(radar, chain, rate=100.0):

@@ -10,7 +10,7 @@ import handradar.sim.cache as cache_mod
 from handradar.errors import FormatError
 from handradar.sim.cache import SlotProfileCache, cache_slot_profiles, pack, unpack
 from handradar.sim.simulator import Simulator
-from tests.sim.helpers import window
+from handradar.sim.demo import window
 
 
 def _data(radar, chain, n=3):

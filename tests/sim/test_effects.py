@@ -17,7 +17,7 @@ from handradar.sim.rcs import cos_angle, disc_rcs_m2
 from handradar.sim.scatterers import Scatterers
 from handradar.sim.simulator import Simulator
 from handradar.sim.synthesis import scatterer_profiles
-from tests.sim.helpers import window as hand_window
+from handradar.sim.demo import window as hand_window
 
 
 def steps(radar, chain, rate=100.0):

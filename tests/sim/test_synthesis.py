@@ -17,7 +17,7 @@ from handradar.sim.interp import interpolate_time, upsample_to_chirps
 from handradar.sim.scatterers import Scatterers, radar_amplitude
 from handradar.sim.simulator import Simulator
 from handradar.sim.synthesis import combine_slots, scatterer_profiles, window_chirp_times
-from tests.sim.helpers import window
+from handradar.sim.demo import window
 
 AMP = dict(tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5)
 

@@ -38,9 +38,10 @@ def interp_weights(times: torch.Tensor, new_times: torch.Tensor) -> tuple[torch.
 def lerp(x: torch.Tensor, lo: torch.Tensor, frac: torch.Tensor) -> torch.Tensor:
     """x (B, T, ...) at interpolation indices/fractions (M,) or (B, M) -> (B, M, ...)."""
     b = x.shape[0]
-    if lo.dim() == 1:
-        lo, frac = lo.expand(b, -1), frac.expand(b, -1)
     tail = [1] * (x.dim() - 2)
+    if lo.dim() == 1:  # times shared by the batch: plain index_select, no (B, M, ...) index tensor
+        x_lo, x_hi = x.index_select(1, lo), x.index_select(1, lo + 1)
+        return x_lo + (x_hi - x_lo) * frac.to(x.dtype).reshape(1, -1, *tail)
     idx = lo.reshape(b, -1, *tail).expand(b, lo.shape[-1], *x.shape[2:])
     x_lo, x_hi = torch.gather(x, 1, idx), torch.gather(x, 1, idx + 1)
     return x_lo + (x_hi - x_lo) * frac.to(x.dtype).reshape(b, -1, *tail)

@@ -19,7 +19,8 @@ with frames = chain.frames_per_window(radar); the skeleton times default to
 Public API:
 
     Simulator(radar, chain, *, hand=HandModelConfig(), effects=(), effect_params=None,
-              skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5)
+              skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5,
+              compile_combine=False)   (True: torch.compile the weighted sum, see synthesis.combine_slots)
       .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
       .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
             network-independent: cache these (sim.cache) and train RadarWeightNet on them
@@ -60,12 +61,14 @@ class Simulator(nn.Module):
 
     def __init__(self, radar: RadarConfig, chain: ChainConfig, *, hand: HandModelConfig | None = None,
                  effects: list | tuple = (), effect_params: dict | None = None, skeleton_rate_hz: float = 100.0,
-                 tx_power_w: float = 0.0158, gain_tx_dbi: float = 10.5, gain_rx_dbi: float = 10.5) -> None:
+                 tx_power_w: float = 0.0158, gain_tx_dbi: float = 10.5, gain_rx_dbi: float = 10.5,
+                 compile_combine: bool = False) -> None:
         super().__init__()
         self.radar, self.chain = radar, chain
         self.hand = hand if isinstance(hand, HandModelConfig) else HandModelConfig(**dict(hand or {}))
         self.skeleton_rate_hz = float(skeleton_rate_hz)
         self.tx_power_w, self.gain_tx_dbi, self.gain_rx_dbi = float(tx_power_w), float(gain_tx_dbi), float(gain_rx_dbi)
+        self.compile_combine = bool(compile_combine)
         self.effects = nn.ModuleList(build_effects(list(effects), dict(effect_params or {})))
         self.register_buffer("chirp_times", torch.as_tensor(window_chirp_times(radar, chain), dtype=torch.float64),
                              persistent=False)
@@ -150,7 +153,7 @@ class Simulator(nn.Module):
         complex tensor or the cache's float16 real view with its per-row ``scale`` (B,);
         ``active`` (38,) skips slots that are zero in the whole batch."""
         w = None if weights is None else self.upsample(weights, times)
-        out = combine_slots(slot_profiles, w, self.radar.n_rx, active)
+        out = combine_slots(slot_profiles, w, self.radar.n_rx, active, compiled=self.compile_combine)
         return out if scale is None else out * scale.to(out.real.dtype).reshape(-1, 1, 1, 1, 1)
 
     def spectrogram(self, signal: torch.Tensor) -> torch.Tensor:

@@ -81,8 +81,23 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     return slots.reshape(bsz, f, l, c * radar.n_rx, N_ALL_SLOTS, -1).permute(0, 4, 1, 2, 3, 5)
 
 
+def _weighted_sum(flat: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """(B, 39, M, 2 bins) real, (B, 38, M, 1) -> (B, M, 2 bins): the kernel torch.compile fuses."""
+    return (flat[:, :N_SLOTS].to(weights.dtype) * weights).sum(1) + flat[:, N_SLOTS].to(weights.dtype)
+
+
+_compiled_weighted_sum = None
+
+
+def _compiled() -> object:
+    global _compiled_weighted_sum
+    if _compiled_weighted_sum is None:
+        _compiled_weighted_sum = torch.compile(_weighted_sum, dynamic=None)
+    return _compiled_weighted_sum
+
+
 def combine_slots(slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, n_rx: int = 1,
-                  active: torch.Tensor | None = None) -> torch.Tensor:
+                  active: torch.Tensor | None = None, compiled: bool = False) -> torch.Tensor:
     """sum_k w_k(c) P_k(c, b) over the 38 bone slots, plus the unweighted slot -> (B, F, L, Ch, bins) complex.
 
     slot_profiles: (B, 39, F, L, Ch, bins) complex, or its real view (..., 2) in any float dtype
@@ -90,7 +105,9 @@ def combine_slots(slot_profiles: torch.Tensor, weights: torch.Tensor | None = No
     chirp times (each chirp's value repeated over its n_rx receivers) or None (all 1).
     active: optional (38,) bool, False for bone slots known to be zero in the whole batch (an
     untracked hand), which are skipped. Accumulating slot by slot in place avoids a (B, 38, ...)
-    temporary: several times faster on a CPU.
+    temporary: several times faster on a CPU. ``compiled=True`` runs the weighted sum through
+    torch.compile instead (one fused pass over the profiles, ~3x faster again; needs a C++ compiler
+    and ~30 s to compile once per process and shape; ``active`` is ignored there).
     """
     real = torch.view_as_real(slot_profiles) if slot_profiles.is_complex() else slot_profiles
     acc_dtype = torch.float64 if real.dtype == torch.float64 else torch.float32
@@ -101,6 +118,8 @@ def combine_slots(slot_profiles: torch.Tensor, weights: torch.Tensor | None = No
         if n_rx > 1:
             weights = weights.repeat_interleave(n_rx, dim=-1)
         weights = weights.to(acc_dtype).reshape(b, N_SLOTS, f * l * ch, 1)
+        if compiled:
+            return torch.view_as_complex(_compiled()(flat, weights).reshape(b, f, l, ch, nb, 2))
     out = flat[:, N_SLOTS].to(acc_dtype).clone()
     ks = range(N_SLOTS) if active is None else torch.nonzero(torch.as_tensor(active)).flatten().tolist()
     for k in ks:

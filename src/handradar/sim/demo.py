@@ -1,4 +1,9 @@
-"""Synthetic hand windows for the simulator tests: a standard hand whose fingers flex."""
+"""Synthetic skeleton windows for demos, tests and benchmarks: a standard hand whose fingers flex.
+
+    flexing_hand(times (T,), seed=0, centre=(0, -0.06, 0.30), hand="right", amplitude_rad=0.5,
+                 drift_m_s=(0, 0, 0)) -> (T, 21, 3) metres, radar frame, palm facing the radar
+    window(times, hands=1 | 2, seed=0, **kw) -> positions (T, 2, 21, 3) float32, mask (T, 2) bool
+"""
 
 from __future__ import annotations
 
