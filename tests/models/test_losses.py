@@ -39,3 +39,19 @@ def test_gradcheck():
     x = torch.rand(1, 16, 16, dtype=torch.float64, requires_grad=True)
     y = torch.rand(1, 16, 16, dtype=torch.float64)
     torch.autograd.gradcheck(lambda p: ssim_loss(p, y), (x,))
+
+
+def test_fast_ssim_loss_equals_ssim_loss():
+    from handradar.models.losses import fast_ssim_loss
+
+    x = torch.rand(3, 64, 32, dtype=torch.float64, requires_grad=True)
+    y = torch.rand(3, 64, 32, dtype=torch.float64)
+    a = ssim_loss(x, y)
+    (ga,) = torch.autograd.grad(a, x)
+    b = fast_ssim_loss(x, y)
+    (gb,) = torch.autograd.grad(b, x)
+    torch.testing.assert_close(b, a)
+    torch.testing.assert_close(gb, ga)
+    assert torch.backends.mkldnn.enabled  # the global flag is left as it was
+    xs = torch.rand(1, 16, 16, dtype=torch.float64, requires_grad=True)
+    torch.autograd.gradcheck(lambda p: fast_ssim_loss(p, y[:1, :16, :16]), (xs,))

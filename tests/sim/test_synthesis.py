@@ -148,3 +148,37 @@ def test_chirp_times_of_the_window(radar, chain):
     ct = window_chirp_times(radar, chain)
     assert ct.shape == (16, 128, 1)
     assert math.isclose(ct[1, 0, 0] - ct[0, 0, 0], radar.frame_period_s)
+
+
+def test_interpolation_paths_agree():
+    """Sparse-matrix path (fixed times) and index path (differentiable times) give the same values."""
+    from handradar.sim.interp import interp_weights, lerp
+
+    t = torch.arange(20, dtype=torch.float64) / 100
+    new = torch.linspace(-0.01, 0.2, 57, dtype=torch.float64)
+    x = torch.randn(3, 20, 4, 2, dtype=torch.float64)
+    lo, frac = interp_weights(t, new)
+    fixed = lerp(x, lo, frac)
+    moving = lerp(x, lo, frac.clone().requires_grad_(True))
+    batched = lerp(x, lo.expand(3, -1), frac.expand(3, -1))
+    torch.testing.assert_close(fixed, moving.detach())
+    torch.testing.assert_close(fixed, batched)
+    np.testing.assert_allclose(fixed[:, 0].numpy(), x[:, 0].numpy())  # clamped before the first step
+    # samples moved to t_i - d: the value at t is x(t + d), whose derivative in d is dx/dt
+    shift = torch.tensor(0.0031, dtype=torch.float64, requires_grad=True)
+    y = interpolate_time(x, t - shift, torch.tensor([0.055], dtype=torch.float64))
+    (g,) = torch.autograd.grad(y.sum(), shift)
+    slope = (x[:, 6] - x[:, 5]).sum() / 0.01
+    assert float(g) == pytest.approx(float(slope), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_compiled_weighted_sum_equals_eager(radar, short_chain):
+    times = _steps(radar, short_chain)
+    pos, mask = window(times, hands=2)
+    sim = Simulator(radar, short_chain)
+    fast = Simulator(radar, short_chain, compile_combine=True)
+    prof = sim.slot_profiles(torch.as_tensor(pos[None]), torch.as_tensor(mask[None]))
+    packed, scale = pack(prof)
+    w = 0.5 + torch.rand(1, len(times), 38)
+    torch.testing.assert_close(fast.combine(packed, w, scale=scale), sim.combine(packed, w, scale=scale), rtol=1e-5, atol=1e-9)

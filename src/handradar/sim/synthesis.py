@@ -122,10 +122,12 @@ def combine_slots(slot_profiles: torch.Tensor, weights: torch.Tensor | None = No
             return torch.view_as_complex(_compiled()(flat, weights).reshape(b, f, l, ch, nb, 2))
     out = flat[:, N_SLOTS].to(acc_dtype).clone()
     ks = range(N_SLOTS) if active is None else torch.nonzero(torch.as_tensor(active)).flatten().tolist()
+    slots = flat.unbind(1)  # unbind, not slicing: one gradient buffer in the backward pass, not 38
+    ws = weights.unbind(1) if weights is not None else None
     for k in ks:
-        p = flat[:, k].to(acc_dtype)
-        if weights is None:
+        p = slots[k].to(acc_dtype)
+        if ws is None:
             out.add_(p)
         else:
-            out.addcmul_(p, weights[:, k])
+            out.addcmul_(p, ws[k])
     return torch.view_as_complex(out.reshape(b, f, l, ch, nb, 2))
