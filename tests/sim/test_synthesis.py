@@ -182,3 +182,22 @@ def test_compiled_weighted_sum_equals_eager(radar, short_chain):
     packed, scale = pack(prof)
     w = 0.5 + torch.rand(1, len(times), 38)
     torch.testing.assert_close(fast.combine(packed, w, scale=scale), sim.combine(packed, w, scale=scale), rtol=1e-5, atol=1e-9)
+
+
+def test_tracking_gap_neither_sweeps_through_the_origin_nor_reflects(radar, short_chain):
+    from handradar.sim.simulator import hold_untracked
+
+    times = _steps(radar, short_chain)
+    pos, mask = window(times, hands=1)
+    mask[21:25, 0] = False  # inside frame 2 (0.2-0.25 s carries chirps)
+    pos[21:25, 0] = 0.0
+    held = hold_untracked(torch.as_tensor(pos[None]), torch.as_tensor(mask[None]))[0]
+    torch.testing.assert_close(held[21:25, 0], torch.as_tensor(pos[20:21, 0]).expand(4, 21, 3))
+    assert float(held[:, 1].abs().max()) == 0.0  # the never-tracked hand stays zero
+    sim = Simulator(radar, short_chain)
+    prof = sim.slot_profiles(torch.as_tensor(pos[None]), torch.as_tensor(mask[None]))
+    # nothing reflects while the hand is untracked: the chirps strictly between steps 21 and 24
+    ct = window_chirp_times(radar, short_chain).reshape(-1)
+    inside = (ct > times[21] + 1e-9) & (ct < times[24] - 1e-9)
+    flat = prof[0, :19].reshape(19, -1, prof.shape[-1])
+    assert inside.any() and float(flat[:, torch.as_tensor(inside)].abs().max()) == 0.0

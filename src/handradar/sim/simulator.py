@@ -56,6 +56,20 @@ from handradar.sim.scatterers import N_SLOTS, bone_scatterers
 from handradar.sim.synthesis import combine_slots, scatterer_profiles, window_chirp_times
 
 
+def hold_untracked(positions: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Untracked steps of a partly tracked hand take the pose of the nearest earlier tracked step
+    (else the next one), so that interpolation to the chirp times never sweeps a hand through the
+    origin (its amplitude is faded by the mask instead); never-tracked hands stay zero."""
+    b, t = mask.shape[:2]
+    steps = torch.arange(t, device=mask.device).reshape(1, t, 1).expand(b, t, 2)
+    last = torch.cummax(torch.where(mask, steps, torch.full_like(steps, -1)), dim=1).values
+    nxt = torch.flip(torch.cummin(torch.flip(torch.where(mask, steps, torch.full_like(steps, t)), [1]), dim=1).values, [1])
+    src = torch.where(last >= 0, last, nxt.clamp(max=t - 1))  # (B, T, 2)
+    held = torch.gather(positions, 1, src[..., None, None].expand_as(positions))
+    held = torch.where(mask.any(dim=1, keepdim=True)[..., None, None], held, torch.zeros_like(held))
+    return torch.where(mask[..., None, None], positions, held)
+
+
 class Simulator(nn.Module):
     """Cylinder-mesh hand reflection model of Tang et al. plus optional effects (module doc)."""
 
@@ -109,8 +123,8 @@ class Simulator(nn.Module):
             times, dtype=torch.float64, device=skeleton.device)
         for e in self._stage("skeleton"):
             skeleton, mask, times = e.apply_skeleton(skeleton, mask, times)
+        skeleton = hold_untracked(skeleton, mask)
         joints = retarget(skeleton, self.lengths.to(skeleton.dtype)) if self.hand.retarget else skeleton
-        joints = joints * mask[..., None, None].to(joints.dtype)
         if visibility is not None:
             visibility = torch.as_tensor(visibility, dtype=skeleton.dtype, device=skeleton.device)
         return SimContext(joints, mask, times, visibility, self.radar, self.chain, self.hand)
