@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 import torch
 
-from handradar.hand.features import bone_features, HandModelConfig
+from handradar.hand.features import HandModelConfig, bone_features
 from handradar.models.losses import ssim_loss
 from handradar.models.radar_weight_net import RadarWeightNet, enhanced_spectrogram, normalise_features, upsample_weights
 from handradar.sim.scatterers import Scatterers
