@@ -134,3 +134,11 @@ def test_interrupted_run_leaves_no_cache_and_resumes(tmp_path, monkeypatch):
     assert isinstance(out, BoneFeatures) and out.features.shape == (4, 6, 2, 19, 5)
     np.testing.assert_array_equal(out.features[3], real(pos[3], t, masks[3], WAVELENGTH, RAW).features)
     assert not list(tmp_path.glob("*.partial"))
+
+
+@pytest.mark.slow  # process start-up dominates: several seconds
+def test_parallel_rows_equal_serial(tmp_path):
+    pos, t, masks = _windows(n=3)
+    serial = cached_bone_features(pos, t, masks, WAVELENGTH, RAW)
+    parallel = cached_bone_features(pos, t, masks, WAVELENGTH, RAW, tmp_path, chunk=2, n_jobs=2)
+    np.testing.assert_array_equal(parallel.features, serial.features)

@@ -76,3 +76,26 @@ def test_rejects_a_foreign_file(tmp_path):
     with pytest.raises(FormatError, match="slot-profile cache"):
         SlotProfileCache(p)
     assert cache_mod.CACHE_FORMAT == "handradar.slot_profiles/1"
+
+
+def test_cache_dataset_builds_both_caches(radar, short_chain, tmp_path):
+    from handradar.data.hdf5 import open_writer
+    from handradar.hand.features import HandModelConfig
+    from handradar.sim.cache import cache_dataset
+
+    sk, mk = _data(radar, short_chain, n=2)
+    ds = tmp_path / "d.h5"
+    with open_writer(ds, classes=["a"], radar=radar, chain=short_chain, skeleton_rate_hz=100.0,
+                     n_steps=sk.shape[1], config_hash="x") as w:
+        for i in range(2):
+            w.append(np.zeros((64, 8), np.float32), 0, sk[i], mk[i], 0.0, {"subject": "s"})
+    sim = Simulator(radar, short_chain, hand=HandModelConfig(visibility_stride=8), effects=["occlusion"])
+    out = cache_dataset(ds, sim, tmp_path / "cache")
+    assert out.features.features.shape == (2, sk.shape[1], 2, 19, 5) and out.profiles.n == 2
+    np.testing.assert_array_equal(out.masks, mk)
+    vis = torch.as_tensor(out.features.visible_fraction()[:1])
+    direct = sim.slot_profiles(torch.as_tensor(sk[:1]), torch.as_tensor(mk[:1]), visibility=vis)
+    rel = (out.profiles.profiles([0]) - direct).abs().max() / direct.abs().max()
+    assert rel < 1e-3
+    with pytest.raises(FormatError, match="chain"):
+        cache_dataset(ds, Simulator(radar, short_chain.__class__(n_columns=16)), tmp_path / "cache")

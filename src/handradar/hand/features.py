@@ -30,7 +30,7 @@ Public API:
     bone_features(positions (T, 2, 21, 3), times (T,), mask (T, 2), wavelength_m, cfg)
         -> BoneFeatures(features (T, 2, 19, 5) float32, facing (T, 2, 19) int32)
     cached_bone_features(positions (N, T, 2, 21, 3), times (T,), masks (N, T, 2), wavelength_m, cfg,
-                         cache_dir, progress=False) -> BoneFeatures((N, T, 2, 19, 5), (N, T, 2, 19))
+                         cache_dir, progress=False, chunk=16, n_jobs=1) -> BoneFeatures((N, T, 2, 19, 5), (N, T, 2, 19))
 """
 
 from __future__ import annotations
@@ -153,11 +153,12 @@ def features_key(positions: np.ndarray, times: np.ndarray, masks: np.ndarray, wa
 
 def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.ndarray, wavelength_m: float,
                          cfg: HandModelConfig | None = None, cache_dir: str | Path | None = None,
-                         *, progress: bool = False, chunk: int = 16) -> BoneFeatures:
+                         *, progress: bool = False, chunk: int = 16, n_jobs: int = 1) -> BoneFeatures:
     """Features of N windows, read from / written to ``cache_dir/bone_features-<hash>.h5``.
 
     positions (N, T, 2, 21, 3), times (T,) shared by all rows, masks (N, T, 2). Without a
-    cache_dir nothing is stored.
+    cache_dir nothing is stored. ``n_jobs`` > 1 computes each block of ``chunk`` rows in that many
+    processes (joblib); progress is saved after every block.
     """
     cfg = cfg or HandModelConfig()
     positions = np.asarray(positions, np.float32)
@@ -197,16 +198,22 @@ def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.nda
             h5p.create_dataset("features", (n, t, 2, N_BONES, N_FEATURES), dtype="f4")
             h5p.create_dataset("facing", (n, t, 2, N_BONES), dtype="i4")
         done = int(h5p.attrs["done"])
-        rows = range(done, n)
+        blocks = range(done, n, chunk)
         if progress:
             from tqdm import tqdm
-            rows = tqdm(rows, desc="bone features", initial=done, total=n)
-        for i in rows:
-            r = compute(i)
-            h5p["features"][i], h5p["facing"][i] = r.features, r.facing
-            if (i + 1) % chunk == 0 or i + 1 == n:
-                h5p.attrs["done"] = i + 1
-                h5p.flush()
+            blocks = tqdm(blocks, desc="bone features", unit="block")
+        for i0 in blocks:
+            i1 = min(n, i0 + chunk)
+            if n_jobs > 1:
+                from joblib import Parallel, delayed
+                rows = Parallel(n_jobs=n_jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m, cfg)
+                                               for i in range(i0, i1))
+            else:
+                rows = [compute(i) for i in range(i0, i1)]
+            h5p["features"][i0:i1] = np.stack([r.features for r in rows])
+            h5p["facing"][i0:i1] = np.stack([r.facing for r in rows])
+            h5p.attrs["done"] = i1
+            h5p.flush()
         feats, facing = h5p["features"][()], h5p["facing"][()]
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as h5:

@@ -22,10 +22,14 @@ Public API:
                                    active (B, 38) bool)
         .profiles(rows) -> complex64 (B, 39, F, L, Ch, bins)    (unpacked, scaled)
     pack(profiles complex) -> (packed float16, scale);  unpack(packed, scale) -> complex64
+    cache_dataset(dataset.h5, sim, cache_dir, batch_size=8, progress=False, n_jobs=1) -> DatasetCaches(features
+        BoneFeatures (N, T, 2, 19, 5), masks (N, T, 2), times (T,), profiles SlotProfileCache): both caches
+        of a handradar.dataset/1 file (features first: their visibility feeds the occlusion effect)
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import h5py
@@ -33,7 +37,9 @@ import numpy as np
 import torch
 
 from handradar.atomic import atomic_path
-from handradar.hand.features import _digest
+from handradar.data.hdf5 import read_attrs
+from handradar.errors import FormatError
+from handradar.hand.features import BoneFeatures, _digest, cached_bone_features
 from handradar.provenance import config_hash
 from handradar.sim.scatterers import N_SLOTS
 
@@ -113,7 +119,6 @@ class SlotProfileCache:
         self.path = Path(path)
         with h5py.File(self.path, "r") as h5:
             if h5.attrs.get("format") != CACHE_FORMAT:
-                from handradar.errors import FormatError
                 raise FormatError(self.path, f"not a slot-profile cache (format {h5.attrs.get('format')!r})")
             self.key = str(h5.attrs["config_hash"])
             self.n = int(h5["profiles"].shape[0]) if "profiles" in h5 else 0
@@ -141,3 +146,49 @@ class SlotProfileCache:
         state = self.__dict__.copy()
         state["_h5"] = None
         return state
+
+
+@dataclass
+class DatasetCaches:
+    """Everything RadarWeightNet training needs from a dataset, network-independent and cached.
+
+    features: (N, T, 2, 19, 5) and facing counts (handradar.hand.features.BoneFeatures)
+    masks: (N, T, 2) bool; times: (T,) seconds; profiles: the slot-profile cache of the N rows.
+    """
+
+    features: BoneFeatures
+    masks: np.ndarray
+    times: np.ndarray
+    profiles: SlotProfileCache
+
+
+def cache_dataset(dataset: str | Path, sim, cache_dir: str | Path, *, batch_size: int = 8,
+                  progress: bool = False, n_jobs: int = 1) -> DatasetCaches:
+    """Bone features and slot profiles of every row of a ``handradar.dataset/1`` file.
+
+    The simulator must match the file's radar, chain and skeleton rate (a FormatError says which
+    differs). Visibility fractions from the features feed the occlusion effect when it is selected.
+    """
+    dataset = Path(dataset)
+    attrs = read_attrs(dataset)
+    radar, chain = attrs.get("radar"), attrs.get("chain")
+    if radar is None or chain is None or "skeleton_rate_hz" not in attrs:
+        raise FormatError(dataset, "needs the attributes radar_cfg, chain and skeleton_rate_hz to simulate its rows")
+    if replace(radar, n_frames=0) != replace(sim.radar, n_frames=0):
+        raise FormatError(dataset, "its radar configuration differs from the simulator's")
+    if chain != sim.chain:
+        raise FormatError(dataset, f"its chain {chain} differs from the simulator's {sim.chain}")
+    if abs(float(attrs["skeleton_rate_hz"]) - sim.skeleton_rate_hz) > 1e-9:
+        raise FormatError(dataset, f"skeleton rate {attrs['skeleton_rate_hz']} Hz differs from the simulator's "
+                                   f"{sim.skeleton_rate_hz} Hz")
+    with h5py.File(dataset, "r") as h5:
+        skeletons = h5["skeletons"][()]
+        masks = h5["hand_mask"][()] if "hand_mask" in h5 else np.abs(skeletons).sum(axis=(-2, -1)) > 0
+    times = np.arange(skeletons.shape[1]) / sim.skeleton_rate_hz
+    feats = cached_bone_features(skeletons, times, masks, sim.radar.wavelength_m, sim.hand, cache_dir,
+                                 progress=progress, n_jobs=n_jobs)
+    needs_visibility = any(e.name == "occlusion" for e in sim.effects)
+    path = cache_slot_profiles(sim, skeletons, masks, cache_dir,
+                               visibility=feats.visible_fraction() if needs_visibility else None,
+                               batch_size=batch_size, progress=progress)
+    return DatasetCaches(feats, masks, times, SlotProfileCache(path))
