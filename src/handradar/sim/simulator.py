@@ -4,6 +4,7 @@ Pipeline of one batch (every step torch, differentiable end to end):
 
     skeleton (B, T, 2, 21, 3) at times (T,) relative to the window start
       -> skeleton-stage effects (tracking_jitter, sync_offset)
+      -> untracked steps of a partly tracked hand hold its last tracked pose (hold_untracked)
       -> standard-hand retargeting (handradar.hand.retarget; HandModelConfig.retarget)
       -> one scattering centre per bone at its midpoint, cylinder RCS (sim.scatterers)
       -> scatterer-stage effects (palm, forearm, occlusion, multipath, antenna_pattern)
@@ -30,6 +31,9 @@ Public API:
       .spectrogram(signal) -> (B, doppler, columns) in [0, 1] (signal effects, then the chain)
       .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
       .chirp_times (F, L, C) float64 buffer, seconds
+      .context(skeleton, mask, *, times, visibility) -> SimContext (retargeted joints, ...) for effects
+    slot 38 of the profiles holds the unweighted reflectors (palm, forearm); multipath images of a
+    bone stay in that bone's slot. With the cache's float16 real view pass its ``scale``.
     skeleton: (B, T, 2, 21, 3) metres radar frame; mask (B, T, 2) bool (untracked hands reflect nothing);
     visibility: optional (B, T, 2, 19) visible/facing fraction from the feature cache (the occlusion
     effect ray casts it itself when absent).
