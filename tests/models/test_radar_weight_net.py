@@ -65,7 +65,13 @@ def test_gradients_reach_the_lstm_through_simulator_stft_and_ssim(radar, short_c
 # ---- recovery of known weights --------------------------------------------------------------------
 def separable_scene(times: np.ndarray, seed: int, n: int = 19):
     """n point reflectors of equal RCS near boresight, each oscillating in range with its own
-    frequency, amplitude and phase (so each has its own Doppler track), and their features."""
+    frequency, amplitude and phase (so each has its own Doppler track), and their features.
+
+    Why not a hand: the bones of a real hand share range bins and Doppler rows and their cylinder
+    RCS spans ~40 dB, so most per-bone weights leave no trace in a 40 dB spectrogram (a flexing-hand
+    version of this test fits the spectrogram to SSIM 0.99997 with weight correlation ~0.4-0.6).
+    Reflectors that the spectrogram can tell apart test what this test is for: that RadarWeightNet,
+    the weighted sum, the chain and the SSIM loss learn weights that are identifiable."""
     rng = np.random.default_rng(seed)
     f = rng.uniform(0.8, 3.0, n)
     ph = rng.uniform(0, 2 * np.pi, n)
