@@ -1,0 +1,48 @@
+"""noise: receiver noise, white complex Gaussian at the ADC, at a signal-to-noise ratio.
+
+Noise n[s] ~ CN(0, sigma^2) per ADC sample goes through the same windowed range FFT as the data
+(handradar.radar.chain.range_profiles_from_adc), so its correlation across range bins is the
+measured one. sigma is set per example from snr_db = 10 log10(P_signal / P_noise), both per
+range bin and chirp after the FFT: P_signal the mean power of the example's dynamic signal (slow-
+time mean removed), P_noise = sigma^2 sum_n w[n]^2. ADC quantisation is not separate: at 16 bits
+it sits far below receiver noise. Draws come from the module's own generator (``seed``);
+``reset_rng()`` replays them. Fitted by grid (the draws make gradients noisy).
+"""
+
+from __future__ import annotations
+
+import torch
+
+from handradar.radar.chain import range_profiles_from_adc, window
+from handradar.sim.effects.base import Effect, Param, register
+
+
+@register
+class Noise(Effect):
+    name = "noise"
+    stage = "signal"
+    order = 80
+    fit = "grid"
+    params = {"snr_db": Param(20.0, -20.0, 60.0, (0.0, 10.0, 20.0, 30.0), "signal-to-noise ratio per range bin, dB")}
+
+    def __init__(self, seed: int = 0, **values: float) -> None:
+        super().__init__(**values)
+        self.seed = int(seed)
+        self.reset_rng()
+
+    def reset_rng(self) -> None:
+        self.generator = torch.Generator().manual_seed(self.seed)
+
+    def apply_signal(self, signal, radar, chain):
+        b, f = signal.shape[:2]
+        real = signal.real.dtype
+        dyn = signal - signal.mean(dim=(-4, -3), keepdim=True)
+        p_sig = (dyn.real**2 + dyn.imag**2).mean(dim=(-4, -3, -2, -1), keepdim=True).detach()  # (B, 1, 1, 1, 1)
+        w2 = float((window(chain.range_window, radar.n_samples, dtype=torch.float64) ** 2).sum())
+        p_noise = p_sig / 10.0 ** (self.value("snr_db").to(real) / 10.0)
+        sigma = torch.sqrt(p_noise / w2)
+        shape = (b, f, radar.chirps_per_frame, radar.n_rx, radar.n_samples)
+        z = torch.complex(torch.randn(shape, generator=self.generator, dtype=real),
+                          torch.randn(shape, generator=self.generator, dtype=real)).to(signal.device) / 2**0.5
+        noise = range_profiles_from_adc(z, radar, chain)  # (B, F, L, Ch, bins), unit per-sample variance
+        return signal + sigma.to(real) * noise

@@ -1,0 +1,188 @@
+"""The differentiable simulator: skeleton window -> per-bone signals -> weighted sum -> spectrogram.
+
+Pipeline of one batch (every step torch, differentiable end to end):
+
+    skeleton (B, T, 2, 21, 3) at times (T,) relative to the window start
+      -> skeleton-stage effects (tracking_jitter, sync_offset)
+      -> untracked steps of a partly tracked hand hold its last tracked pose (hold_untracked)
+      -> standard-hand retargeting (handradar.hand.retarget; HandModelConfig.retarget)
+      -> one scattering centre per bone at its midpoint, cylinder RCS (sim.scatterers)
+      -> scatterer-stage effects (palm, forearm, occlusion, multipath, antenna_pattern)
+      -> per-slot range profiles at the true chirp times (sim.synthesis)     (B, 39, F, L, Ch, bins)
+      -> weighted sum with RadarWeightNet weights (or 1)                      (B, F, L, Ch, bins)
+      -> signal-stage effects (noise)
+      -> handradar.radar.chain.spectrogram_from_profiles: the chain of the measured data (B, 64, 32)
+
+The window starts at a frame boundary, so its chirp times are ``radar.chirp_times_s(frames)``
+with frames = chain.frames_per_window(radar); the skeleton times default to
+``arange(T) / skeleton_rate_hz`` (the dataset rows of handradar.data.examples).
+
+Public API:
+
+    Simulator(radar, chain, *, hand=HandModelConfig(), effects=(), effect_params=None,
+              skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5,
+              compile_combine=False)   (True: torch.compile the weighted sum, see synthesis.combine_slots)
+      .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
+      .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
+            network-independent: cache these (sim.cache) and train RadarWeightNet on them
+      .combine(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, F, L, Ch, bins)
+            weights (B, T, 38) positive at the skeleton steps (slot = hand * 19 + bone),
+            upsampled linearly in time to the chirp times
+      .spectrogram(signal) -> (B, doppler, columns) in [0, 1] (signal effects, then the chain)
+      .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
+      .chirp_times (F, L, C) float64 buffer, seconds
+      .context(skeleton, mask, *, times, visibility) -> SimContext (retargeted joints, ...) for effects
+    slot 38 of the profiles holds the unweighted reflectors (palm, forearm); multipath images of a
+    bone stay in that bone's slot. With the cache's float16 real view pass its ``scale``.
+    skeleton: (B, T, 2, 21, 3) metres radar frame; mask (B, T, 2) bool (untracked hands reflect nothing);
+    visibility: optional (B, T, 2, 19) visible/facing fraction from the feature cache (the occlusion
+    effect ray casts it itself when absent).
+
+Amplitude defaults: TX power 12 dBm (AWR1843 data sheet), 10.5 dBi per antenna (AWR1843BOOST
+patch array); they set absolute levels only (the noise effect sets its level from an SNR and the
+spectrogram is normalised to its peak).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from handradar.hand.features import HandModelConfig
+from handradar.hand.mesh import bone_radii
+from handradar.hand.retarget import retarget, standard_lengths
+from handradar.radar.chain import ChainConfig, spectrogram_from_profiles
+from handradar.radar.config import RadarConfig
+from handradar.sim import effects as _effects  # noqa: F401  (registers the eight effects)
+from handradar.sim.effects.base import Effect, SimContext, build_effects
+from handradar.sim.interp import upsample_to_chirps
+from handradar.sim.scatterers import N_SLOTS, bone_scatterers
+from handradar.sim.synthesis import combine_slots, scatterer_profiles, window_chirp_times
+
+
+def hold_untracked(positions: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Untracked steps of a partly tracked hand take the pose of the nearest earlier tracked step
+    (else the next one), so that interpolation to the chirp times never sweeps a hand through the
+    origin (its amplitude is faded by the mask instead); never-tracked hands stay zero."""
+    b, t = mask.shape[:2]
+    steps = torch.arange(t, device=mask.device).reshape(1, t, 1).expand(b, t, 2)
+    last = torch.cummax(torch.where(mask, steps, torch.full_like(steps, -1)), dim=1).values
+    nxt = torch.flip(torch.cummin(torch.flip(torch.where(mask, steps, torch.full_like(steps, t)), [1]), dim=1).values, [1])
+    src = torch.where(last >= 0, last, nxt.clamp(max=t - 1))  # (B, T, 2)
+    held = torch.gather(positions, 1, src[..., None, None].expand_as(positions))
+    held = torch.where(mask.any(dim=1, keepdim=True)[..., None, None], held, torch.zeros_like(held))
+    return torch.where(mask[..., None, None], positions, held)
+
+
+class Simulator(nn.Module):
+    """Cylinder-mesh hand reflection model of Tang et al. plus optional effects (module doc)."""
+
+    def __init__(self, radar: RadarConfig, chain: ChainConfig, *, hand: HandModelConfig | None = None,
+                 effects: list | tuple = (), effect_params: dict | None = None, skeleton_rate_hz: float = 100.0,
+                 tx_power_w: float = 0.0158, gain_tx_dbi: float = 10.5, gain_rx_dbi: float = 10.5,
+                 compile_combine: bool = False) -> None:
+        super().__init__()
+        self.radar, self.chain = radar, chain
+        self.hand = hand if isinstance(hand, HandModelConfig) else HandModelConfig(**dict(hand or {}))
+        self.skeleton_rate_hz = float(skeleton_rate_hz)
+        self.tx_power_w, self.gain_tx_dbi, self.gain_rx_dbi = float(tx_power_w), float(gain_tx_dbi), float(gain_rx_dbi)
+        self.compile_combine = bool(compile_combine)
+        self.effects = nn.ModuleList(build_effects(list(effects), dict(effect_params or {})))
+        self.register_buffer("chirp_times", torch.as_tensor(window_chirp_times(radar, chain), dtype=torch.float64),
+                             persistent=False)
+        self.register_buffer("radii", torch.as_tensor(bone_radii(), dtype=torch.float32), persistent=False)
+        self.register_buffer("lengths", torch.as_tensor(standard_lengths(self.hand.hand_scale), dtype=torch.float32),
+                             persistent=False)
+
+    # ---- helpers -------------------------------------------------------------------------------
+    def effect(self, name: str) -> Effect:
+        for e in self.effects:
+            if e.name == name:
+                return e
+        raise KeyError(f"effect {name!r} is not in this simulator (has {[e.name for e in self.effects]})")
+
+    def _stage(self, stage: str) -> list[Effect]:
+        return [e for e in self.effects if e.stage == stage]
+
+    def default_times(self, n_steps: int) -> torch.Tensor:
+        """Skeleton step times (T,) seconds from the window start."""
+        return torch.arange(n_steps, dtype=torch.float64, device=self.chirp_times.device) / self.skeleton_rate_hz
+
+    def _check(self, skeleton: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        skeleton = torch.as_tensor(skeleton, device=self.chirp_times.device)
+        mask = torch.as_tensor(mask, device=self.chirp_times.device).bool()
+        if skeleton.dim() != 5 or skeleton.shape[2:] != (2, 21, 3) or mask.shape != skeleton.shape[:3]:
+            raise ValueError(f"expected skeleton (B, T, 2, 21, 3) and mask (B, T, 2), found "
+                             f"{tuple(skeleton.shape)} and {tuple(mask.shape)}")
+        if not skeleton.is_floating_point():
+            skeleton = skeleton.float()
+        return skeleton, mask
+
+    # ---- the pipeline ------------------------------------------------------------------------------
+    def context(self, skeleton: torch.Tensor, mask: torch.Tensor, *, times: torch.Tensor | None = None,
+                visibility: torch.Tensor | None = None) -> SimContext:
+        """Skeleton-stage effects and retargeting: the context the scatterer effects see."""
+        skeleton, mask = self._check(skeleton, mask)
+        times = self.default_times(skeleton.shape[1]) if times is None else torch.as_tensor(
+            times, dtype=torch.float64, device=skeleton.device)
+        for e in self._stage("skeleton"):
+            skeleton, mask, times = e.apply_skeleton(skeleton, mask, times)
+        skeleton = hold_untracked(skeleton, mask)
+        joints = retarget(skeleton, self.lengths.to(skeleton.dtype)) if self.hand.retarget else skeleton
+        if visibility is not None:
+            visibility = torch.as_tensor(visibility, dtype=skeleton.dtype, device=skeleton.device)
+        return SimContext(joints, mask, times, visibility, self.radar, self.chain, self.hand)
+
+    def slot_profiles(self, skeleton: torch.Tensor, mask: torch.Tensor, *, times: torch.Tensor | None = None,
+                      visibility: torch.Tensor | None = None) -> torch.Tensor:
+        """Per-slot range profiles (B, 39, F, L, Ch, bins): 38 bone slots + 1 unweighted slot."""
+        ctx = self.context(skeleton, mask, times=times, visibility=visibility)
+        return self._profiles(ctx)
+
+    def _profiles(self, ctx: SimContext) -> torch.Tensor:
+        scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii)
+        for e in self._stage("scatterers"):
+            scat = e.apply_scatterers(scat, ctx)
+        return scatterer_profiles(scat, ctx.times, self.chirp_times, self.radar, self.chain,
+                                  tx_power_w=self.tx_power_w, gain_tx_dbi=self.gain_tx_dbi, gain_rx_dbi=self.gain_rx_dbi)
+
+    def step_times(self, n_steps: int, times: torch.Tensor | None = None) -> torch.Tensor:
+        """Radar-clock times of the skeleton steps after the skeleton-stage effects (a clock offset
+        moves them), so that weights stay attached to the poses they were computed from."""
+        times = self.default_times(n_steps) if times is None else torch.as_tensor(
+            times, dtype=torch.float64, device=self.chirp_times.device)
+        dummy = torch.zeros(1, n_steps, 2, 21, 3, device=self.chirp_times.device)
+        mask = torch.ones(1, n_steps, 2, dtype=torch.bool, device=self.chirp_times.device)
+        for e in self._stage("skeleton"):
+            dummy, mask, times = e.apply_skeleton(dummy, mask, times)
+        return times
+
+    def upsample(self, weights: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
+        """Weights (B, T, 38) at the skeleton steps -> (B, 38, F, L, C) at the chirp times."""
+        if weights.dim() != 3 or weights.shape[-1] != N_SLOTS:
+            raise ValueError(f"weights must be (B, T, {N_SLOTS}), found {tuple(weights.shape)}")
+        return upsample_to_chirps(weights, self.step_times(weights.shape[1], times), self.chirp_times)
+
+    def combine(self, slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, *,
+                times: torch.Tensor | None = None, active: torch.Tensor | None = None,
+                scale: torch.Tensor | None = None) -> torch.Tensor:
+        """Weighted sum of the slots (B, F, L, Ch, bins); weights (B, T, 38) at the skeleton steps
+        (``times`` as given to slot_profiles, before any clock offset). slot_profiles may be the
+        complex tensor or the cache's float16 real view with its per-row ``scale`` (B,);
+        ``active`` (38,) skips slots that are zero in the whole batch."""
+        w = None if weights is None else self.upsample(weights, times)
+        out = combine_slots(slot_profiles, w, self.radar.n_rx, active, compiled=self.compile_combine)
+        return out if scale is None else out * scale.to(out.real.dtype).reshape(-1, 1, 1, 1, 1)
+
+    def spectrogram(self, signal: torch.Tensor) -> torch.Tensor:
+        """Summed signal -> signal-stage effects -> the shared chain -> (B, doppler, columns) in [0, 1]."""
+        for e in self._stage("signal"):
+            signal = e.apply_signal(signal, self.radar, self.chain)
+        return spectrogram_from_profiles(signal, self.chain)
+
+    def forward(self, skeleton: torch.Tensor, mask: torch.Tensor, weights: torch.Tensor | None = None, *,
+                times: torch.Tensor | None = None, visibility: torch.Tensor | None = None) -> torch.Tensor:
+        ctx = self.context(skeleton, mask, times=times, visibility=visibility)
+        signal = self.combine(self._profiles(ctx), weights, times=times)
+        return self.spectrogram(signal)
+

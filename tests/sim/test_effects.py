@@ -1,0 +1,314 @@
+"""Each effect: API contract, and that it changes the signal the way it claims (small checks)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from handradar.hand.retarget import standard_hand
+from handradar.radar.chain import gate_bins, remove_static_clutter, stft_power
+from handradar.sim.effects import EFFECT_NAMES, REGISTRY, STAGES, Effect, build_effects
+from handradar.sim.effects.multipath import Multipath
+from handradar.sim.effects.palm import palm_frame
+from handradar.sim.rcs import cos_angle, disc_rcs_m2
+from handradar.sim.scatterers import Scatterers
+from handradar.sim.simulator import Simulator
+from handradar.sim.synthesis import scatterer_profiles
+from handradar.sim.demo import window as hand_window
+
+
+def steps(radar, chain, rate=100.0):
+    n = int(round(chain.frames_per_window(radar) * radar.frame_period_s * rate))
+    return np.arange(n) / rate
+
+
+def batch(pos, mask):
+    return torch.as_tensor(np.asarray(pos)[None]), torch.as_tensor(np.asarray(mask)[None])
+
+
+def one_hand(times, joints_fn):
+    pos = np.zeros((len(times), 2, 21, 3), np.float32)
+    for i, t in enumerate(times):
+        pos[i, 0] = joints_fn(t)
+    mask = np.zeros((len(times), 2), bool)
+    mask[:, 0] = True
+    return pos, mask
+
+
+def bin_power(profiles: torch.Tensor) -> torch.Tensor:
+    """Mean power per gated range bin of (..., F, L, Ch, bins) profiles."""
+    return (profiles.abs() ** 2).mean(dim=(-4, -3, -2)).flatten()
+
+
+# ---- the API contract ----------------------------------------------------------------------------
+def test_eight_registered_effects_follow_the_contract():
+    assert set(EFFECT_NAMES) == {"occlusion", "palm", "forearm", "multipath", "antenna_pattern", "noise",
+                                 "sync_offset", "tracking_jitter"}
+    for name in EFFECT_NAMES:
+        cls = REGISTRY[name]
+        assert issubclass(cls, Effect) and cls.name == name and cls.stage in STAGES and cls.fit in ("grad", "grid")
+        e = cls()
+        assert e.values() == pytest.approx(cls.defaults())
+        grid = cls.grid()
+        assert 2 <= len(grid) <= 12 and all(set(g) == set(cls.params) for g in grid)
+        for p in cls.params.values():
+            assert p.low <= p.default <= p.high
+        assert all(not p.requires_grad for p in e.parameters())  # frozen unless a fitter unfreezes them
+        key = next(iter(cls.params))
+        with pytest.raises(ValueError, match="outside its bounds"):
+            e.set_values(**{key: cls.params[key].high + 1.0})
+    with pytest.raises(ValueError, match="no parameter"):
+        REGISTRY["noise"](snr=3)
+    with pytest.raises(ValueError, match="unknown effect"):
+        build_effects(["glare"])
+    order = [e.name for e in build_effects(["noise", "occlusion", "sync_offset", "palm"])]
+    assert order == ["sync_offset", "palm", "occlusion", "noise"]
+    # parameters of unselected effects are allowed (a config may carry them all)
+    assert [e.values() for e in build_effects(["noise"], {"noise": {"snr_db": 5.0}, "palm": {"radius_m": 0.03}})] == [{"snr_db": 5.0}]
+
+
+def test_bounds_clamp_and_pass_gradients_at_the_bound():
+    e = REGISTRY["occlusion"]()
+    e.requires_grad_(True)
+    with torch.no_grad():
+        e.transmission.fill_(-0.5)
+    v = e.value("transmission")
+    assert float(v.detach()) == 0.0
+    v.backward()
+    assert float(e.transmission.grad) == 1.0  # straight through: a fitter can move it back inside
+    e.clamp_()
+    assert float(e.transmission.detach()) == 0.0
+
+
+# ---- occlusion --------------------------------------------------------------------------------------
+def test_occlusion_scales_amplitudes_by_visibility(radar, short_chain):
+    times = steps(radar, short_chain)
+    pos, mask = hand_window(times, hands=2)
+    sk, mk = batch(pos, mask)
+    vis = torch.ones(1, len(times), 2, 19)
+    vis[:, :, 1] = 0.0  # the left hand fully hidden
+    plain = Simulator(radar, short_chain).slot_profiles(sk, mk)
+    occl = Simulator(radar, short_chain, effects=["occlusion"])
+    hidden = occl.slot_profiles(sk, mk, visibility=vis)
+    assert float(hidden[:, 19:38].abs().max()) == 0.0
+    torch.testing.assert_close(hidden[:, :19], plain[:, :19])
+    occl.effect("occlusion").set_values(transmission=0.25)
+    part = occl.slot_profiles(sk, mk, visibility=vis)
+    torch.testing.assert_close(part[:, 19:38], 0.5 * plain[:, 19:38])  # amplitude sqrt(0.25)
+    occl.effect("occlusion").set_values(transmission=1.0)
+    torch.testing.assert_close(occl(sk, mk, visibility=vis), Simulator(radar, short_chain)(sk, mk))
+
+
+def test_occlusion_ray_casts_when_no_visibility_is_given(radar, short_chain):
+    times = steps(radar, short_chain)[:6]
+    right = standard_hand() + [0.0, -0.08, 0.25]
+    left = standard_hand(hand="left") + [0.0, -0.08, 0.40]
+    pos = np.broadcast_to(np.stack([right, left]), (len(times), 2, 21, 3)).astype(np.float32).copy()
+    pos += (np.linspace(0, 0.01, len(times))[:, None, None, None] * np.array([0, 0, 1])).astype(np.float32)
+    sk, mk = batch(pos, np.ones((len(times), 2), bool))
+    sim = Simulator(radar, short_chain, effects=["occlusion"], skeleton_rate_hz=100.0)
+    plain = Simulator(radar, short_chain)
+    ratio_left = float(bin_power(sim.slot_profiles(sk, mk)[:, 19:38]).sum() / bin_power(plain.slot_profiles(sk, mk)[:, 19:38]).sum())
+    ratio_right = float(bin_power(sim.slot_profiles(sk, mk)[:, :19]).sum() / bin_power(plain.slot_profiles(sk, mk)[:, :19]).sum())
+    assert ratio_left < 0.4 < 0.8 < ratio_right  # the far hand lies in the near hand's shadow
+
+
+# ---- palm ----------------------------------------------------------------------------------------
+def test_palm_adds_a_disc_reflector_at_the_palm(radar, short_chain):
+    times = steps(radar, short_chain)
+    h = standard_hand()
+    h = h - 0.5 * (h[0] + h[[5, 9, 13, 17]].mean(0))  # palm centre over the radar
+    pos, mask = one_hand(times, lambda t: h + [0.0, 0.0, 0.30 - 0.3 * t])  # palm down, approaching
+    sk, mk = batch(pos, mask)
+    sim = Simulator(radar, short_chain, effects=["palm"])
+    prof = sim.slot_profiles(sk, mk)
+    ctx = sim.context(sk, mk)
+    centre, normal = palm_frame(ctx.joints[0, :, 0])
+    # the palm normal of a flat palm-down hand points along z: the disc faces the radar
+    assert float((normal / normal.norm(dim=-1, keepdim=True))[:, 2].abs().min()) > 0.99
+    peak_bin = int(bin_power(prof[:, 38]).argmax()) + gate_bins(radar, short_chain)[0]
+    mean_range = float(centre.norm(dim=-1).mean())
+    assert abs(peak_bin * radar.range_resolution_m - mean_range) <= radar.range_resolution_m
+    # the unweighted slot is exactly one disc scatterer per tracked hand at the palm centre
+    rcs = disc_rcs_m2(cos_angle(centre, normal), 0.02, radar.wavelength_m)
+    disc = Scatterers(centre[None, :, None], centre[None, :, None], rcs[None, :, None], torch.ones_like(rcs)[None, :, None],
+                      torch.tensor([-1]))
+    alone = scatterer_profiles(disc, ctx.times, sim.chirp_times, radar, short_chain, tx_power_w=sim.tx_power_w,
+                               gain_tx_dbi=sim.gain_tx_dbi, gain_rx_dbi=sim.gain_rx_dbi)[:, 38]
+    torch.testing.assert_close(prof[:, 38], alone)
+    # a disc facing the radar is a large reflector: it outshines all 19 finger bones together
+    assert float(bin_power(prof[:, 38]).sum()) > 2 * float(bin_power(prof[:, :38].sum(1)).sum())
+    sim.effect("palm").set_values(radius_m=0.005)
+    small = float(bin_power(sim.slot_profiles(sk, mk)[:, 38]).sum()) / float(bin_power(prof[:, 38]).sum())
+    assert small == pytest.approx((0.005 / 0.02) ** 4, rel=0.1)  # broadside disc RCS ~ a^4
+
+
+# ---- forearm -------------------------------------------------------------------------------------
+def _pointing_down(t: float) -> np.ndarray:
+    """Hand pointing forward and down at 45 deg: its forearm runs back and up, away from the radar."""
+    h = standard_hand()
+    c = math.sqrt(0.5)
+    rot = np.array([[1.0, 0, 0], [0, c, c], [0, -c, c]])  # +y -> (0, c, -c)
+    return h @ rot.T + [0.0, -0.12, 0.42 + 0.02 * math.sin(2 * math.pi * 2 * t)]
+
+
+def test_forearm_adds_reflectors_beyond_the_wrist(radar, short_chain):
+    times = steps(radar, short_chain)
+    sk, mk = batch(*one_hand(times, _pointing_down))
+    b0 = gate_bins(radar, short_chain)[0]
+    sim = Simulator(radar, short_chain, effects=["forearm"])
+    extra = bin_power(sim.slot_profiles(sk, mk)[:, 38])
+    wrist_range = float(np.linalg.norm(_pointing_down(0.0)[0]))
+    bins = torch.arange(len(extra)) + b0
+    mean_bin = float((extra * bins).sum() / extra.sum())
+    assert mean_bin * radar.range_resolution_m > wrist_range + 0.03  # behind the wrist, seen from the radar
+    far_short = int(torch.nonzero(extra > 1e-2 * extra.max()).max())
+    sim.effect("forearm").set_values(length_m=0.28)
+    extra_long = bin_power(sim.slot_profiles(sk, mk)[:, 38])
+    far_long = int(torch.nonzero(extra_long > 1e-2 * extra_long.max()).max())
+    assert far_long > far_short  # a longer forearm reaches farther bins
+    assert float(bin_power(Simulator(radar, short_chain).slot_profiles(sk, mk)[:, 38]).sum()) == 0.0
+
+
+# ---- multipath -----------------------------------------------------------------------------------
+def test_multipath_image_geometry_and_gains():
+    p = torch.tensor([[[[0.05, 0.02, 0.30]]]], dtype=torch.float64)
+    scat = Scatterers(p, p, torch.full((1, 1, 1), 1e-3, dtype=torch.float64), torch.ones(1, 1, 1, dtype=torch.float64),
+                      torch.tensor([7]))
+    out = Multipath(height_m=0.05, reflection_coeff=0.4).apply_scatterers(scat, None)
+    image = torch.tensor([0.05, 0.02, -0.40], dtype=torch.float64)
+    assert out.n_points == 3 and out.owner.tolist() == [7, 7, 7]
+    torch.testing.assert_close(out.rx[0, 0, 1], image)  # one bounce: out direct, back via the table
+    torch.testing.assert_close(out.tx[0, 0, 2], image)  # two bounces: both legs via the table
+    torch.testing.assert_close(out.rx[0, 0, 2], image)
+    torch.testing.assert_close(out.gain[0, 0], torch.tensor([1.0, 0.8, 0.16], dtype=torch.float64))
+
+
+def test_multipath_adds_delayed_echoes(radar, short_chain):
+    times = steps(radar, short_chain)
+    sk, mk = batch(*hand_window(times))
+    plain = bin_power(Simulator(radar, short_chain).slot_profiles(sk, mk).sum(1))
+    sim = Simulator(radar, short_chain, effects=["multipath"], effect_params={"multipath": {"height_m": 0.2, "reflection_coeff": 0.5}})
+    mp = bin_power(sim.slot_profiles(sk, mk).sum(1))
+    b0 = gate_bins(radar, short_chain)[0]
+    near = round(0.32 / radar.range_resolution_m) - b0  # the hand, 0.30-0.33 m
+    far = round(0.47 / radar.range_resolution_m) - b0  # one-bounce echoes at (0.3 + 0.7) / 2 = 0.5 m
+    assert float(mp[far:].sum()) > 100 * float(plain[far:].sum())
+    assert float(mp[far:].sum()) > 0.1 * float(mp[: near + 1].sum())
+    sim.effect("multipath").set_values(reflection_coeff=0.0)
+    torch.testing.assert_close(sim(sk, mk), Simulator(radar, short_chain)(sk, mk))
+
+
+# ---- antenna pattern -----------------------------------------------------------------------------
+def test_antenna_pattern_weights_off_boresight_hands_by_cos_q(radar, short_chain):
+    times = steps(radar, short_chain)
+    pos, mask = hand_window(times, hands=2)
+    # move the left hand 50 deg off boresight (same range)
+    c = pos[:, 1].mean(axis=(0, 1))
+    rng_c = np.linalg.norm(c)
+    target = rng_c * np.array([math.sin(math.radians(50)), 0.0, math.cos(math.radians(50))])
+    pos[:, 1] += (target - c).astype(np.float32)
+    sk, mk = batch(pos, mask)
+    plain = Simulator(radar, short_chain).slot_profiles(sk, mk)
+    q = 4.0
+    sim = Simulator(radar, short_chain, effects=["antenna_pattern"], effect_params={"antenna_pattern": {"q": q}})
+    pat = sim.slot_profiles(sk, mk)
+    left = float(bin_power(pat[:, 19:38].sum(1)).sum() / bin_power(plain[:, 19:38].sum(1)).sum())
+    right = float(bin_power(pat[:, :19].sum(1)).sum() / bin_power(plain[:, :19].sum(1)).sum())
+    # power x G(theta)^2 = cos^(2q); the hands span some degrees, hence the tolerance
+    assert left == pytest.approx(math.cos(math.radians(50)) ** (2 * q), rel=0.35)
+    assert right > 0.8 and left < 0.05
+    sim.effect("antenna_pattern").set_values(q=0.0)
+    torch.testing.assert_close(sim.slot_profiles(sk, mk), plain)
+
+
+# ---- noise ---------------------------------------------------------------------------------------
+def test_noise_has_the_requested_snr_and_raises_the_floor(radar, short_chain):
+    times = steps(radar, short_chain)
+    sk, mk = batch(*hand_window(times))
+    sim = Simulator(radar, short_chain, effects=["noise"], effect_params={"noise": {"snr_db": 10.0}})
+    clean = sim.combine(sim.slot_profiles(sk, mk))
+    noise_eff = sim.effect("noise")
+    noisy = noise_eff.apply_signal(clean, radar, short_chain)
+    dyn = remove_static_clutter(clean)
+    p_sig = float((dyn.abs() ** 2).mean())
+    p_noise = float(((noisy - clean).abs() ** 2).mean())
+    assert 10 * math.log10(p_sig / p_noise) == pytest.approx(10.0, abs=0.3)
+    # reproducible draws
+    noise_eff.reset_rng()
+    a = noise_eff.apply_signal(clean, radar, short_chain)
+    noise_eff.reset_rng()
+    torch.testing.assert_close(noise_eff.apply_signal(clean, radar, short_chain), a)
+    # a lower SNR lifts the spectrogram's floor
+    medians = []
+    for snr in (40.0, 10.0, 0.0):
+        noise_eff.set_values(snr_db=snr)
+        noise_eff.reset_rng()
+        medians.append(float(sim.spectrogram(clean).median()))
+    assert medians[0] < medians[1] < medians[2]
+
+
+# ---- sync offset ---------------------------------------------------------------------------------
+def test_sync_offset_moves_the_motion_onset(radar, short_chain):
+    times = steps(radar, short_chain)
+    t_on, v = 0.17, 0.4  # starts in frame 1's idle gap: columns 4.. move (two 25 ms columns per 100 ms frame)
+
+    def pose(t):
+        return standard_hand() + [0.0, -0.08, 0.35 - v * max(0.0, t - t_on)]
+
+    sk, mk = batch(*one_hand(times, pose))
+    row = round(2 * v / radar.wavelength_m * short_chain.stft_len * radar.loop_period_s) + short_chain.stft_len // 2
+
+    def first_moving_column(sim):
+        rows = sim(sk, mk)[0].argmax(0)
+        return int(torch.nonzero(rows == row).min())
+
+    assert first_moving_column(Simulator(radar, short_chain)) == 4
+    lagging = Simulator(radar, short_chain, effects=["sync_offset"], effect_params={"sync_offset": {"offset_s": 0.1}})
+    assert first_moving_column(lagging) == 2  # the skeleton lags by 0.1 s: the motion began one frame earlier
+    # the same as feeding the skeleton with its times moved by -offset
+    shifted = Simulator(radar, short_chain)(sk, mk, times=torch.as_tensor(times - 0.1))
+    torch.testing.assert_close(lagging(sk, mk), shifted, atol=1e-4, rtol=0)  # the offset is a float32 parameter
+
+
+# ---- tracking jitter -----------------------------------------------------------------------------
+def test_tracking_jitter_smoothing_removes_jitter_doppler(radar, short_chain):
+    times = steps(radar, short_chain)
+    rng = np.random.default_rng(0)
+    base = standard_hand() + [0.0, -0.08, 0.30]
+    pos, mask = one_hand(times, lambda t: base)
+    pos[:, 0] += rng.normal(scale=2e-4, size=pos[:, 0].shape).astype(np.float32)  # tracker jitter, 0.2 mm
+    sk, mk = batch(pos, mask)
+    offset = (torch.arange(short_chain.stft_len) - short_chain.stft_len // 2).abs()[:, None].float()
+
+    def doppler_power(sim):
+        power = stft_power(remove_static_clutter(sim.slot_profiles(sk, mk).sum(1)), short_chain)[0]
+        return float(power.sum()), float((power * offset).sum() / power.sum())  # total, mean |row offset|
+
+    raw_p, raw_spread = doppler_power(Simulator(radar, short_chain))
+    smooth_p, smooth_spread = doppler_power(Simulator(radar, short_chain, effects=["tracking_jitter"],
+                                                      effect_params={"tracking_jitter": {"sigma_s": 0.03}}))
+    # a Gaussian of 3 samples passes 1 / (2 sqrt(pi) 3) ~ 0.09 of white jitter's power (more after the
+    # window's mean removal and the interpolation to chirps)
+    assert smooth_p < 0.2 * raw_p
+    assert smooth_spread < 0.5 * raw_spread  # what is left sits near zero Doppler
+    tiny = Simulator(radar, short_chain, effects=["tracking_jitter"], effect_params={"tracking_jitter": {"sigma_s": 0.0}})
+    torch.testing.assert_close(tiny(sk, mk), Simulator(radar, short_chain)(sk, mk))
+
+
+def test_all_effects_together_are_differentiable_in_their_parameters(radar, short_chain):
+    times = steps(radar, short_chain)
+    sk, mk = batch(*hand_window(times, hands=2))
+    sim = Simulator(radar, short_chain, effects=list(EFFECT_NAMES))
+    for e in sim.effects:
+        e.requires_grad_(True)
+    vis = torch.full((1, len(times), 2, 19), 0.5)
+    sim(sk, mk, visibility=vis).mean().backward()
+    for e in sim.effects:
+        for name, p in e.named_parameters():
+            assert p.grad is not None and torch.isfinite(p.grad), (e.name, name)
+    grads = {e.name: float(next(e.parameters()).grad.abs()) for e in sim.effects if e.fit == "grad"}
+    assert all(g > 0 for n, g in grads.items() if n not in ("multipath",)), grads

@@ -1,0 +1,203 @@
+"""Per-reflection-point synthesis against the ADC path and closed-form Doppler lines."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from handradar.hand.retarget import standard_hand
+from handradar.hand.skeleton import BONE_CHILD, BONE_PARENT
+from handradar.radar.chain import range_profiles_from_adc, spectrogram_from_profiles
+from handradar.radar.signal import beat_signal
+from handradar.sim.cache import pack
+from handradar.sim.interp import interpolate_time, upsample_to_chirps
+from handradar.sim.scatterers import Scatterers, radar_amplitude
+from handradar.sim.simulator import Simulator
+from handradar.sim.synthesis import combine_slots, scatterer_profiles, window_chirp_times
+from handradar.sim.demo import window
+
+AMP = dict(tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5)
+
+
+def _steps(radar, chain, rate=100.0):
+    n = int(round(chain.frames_per_window(radar) * radar.frame_period_s * rate))
+    return np.arange(n) / rate
+
+
+def _adc_profiles(radar, chain, tx_steps, rx_steps, amp_steps, times):
+    """The ADC path: trajectory and amplitude interpolated to the chirp times, beat_signal, explicit FFT."""
+    ct = window_chirp_times(radar, chain)  # (F, L, 1)
+    flat = ct.reshape(-1)
+
+    def lerp(x):
+        return np.stack([np.interp(flat, times, x[:, i]) for i in range(x.shape[1])], -1)
+
+    r = 0.5 * (np.linalg.norm(lerp(tx_steps), axis=-1) + np.linalg.norm(lerp(rx_steps), axis=-1))
+    a = np.interp(flat, times, amp_steps)
+    f = ct.shape[0]
+    adc = beat_signal(radar, r.reshape(f, -1, 1, 1), a.reshape(f, -1, 1, 1))
+    return range_profiles_from_adc(torch.as_tensor(adc), radar, chain)
+
+
+@pytest.mark.parametrize("image", [False, True])
+def test_point_scatterer_profiles_equal_the_adc_path(radar, short_chain, image):
+    times = _steps(radar, short_chain)
+    tx = np.stack([0.02 + 0.0 * times, 0.01 + 0.03 * times, 0.30 + 0.05 * np.sin(2 * np.pi * 1.3 * times)], -1)
+    rx = tx * [1, 1, -1] - [0, 0, 0.1] if image else tx  # an image-like bistatic leg
+    rcs = 1e-3 * (1 + 0.5 * np.sin(2 * np.pi * 2 * times))
+    scat = Scatterers(torch.as_tensor(tx[None, :, None]), torch.as_tensor(rx[None, :, None]),
+                      torch.as_tensor(rcs[None, :, None]), torch.ones(1, len(times), 1, dtype=torch.float64),
+                      torch.tensor([5]))
+    prof = scatterer_profiles(scat, torch.as_tensor(times), window_chirp_times(radar, short_chain), radar,
+                              short_chain, **AMP)
+    assert prof.shape[:2] == (1, 39) and prof.dtype == torch.complex128
+    others = torch.cat([prof[0, :5], prof[0, 6:]])
+    assert float(others.abs().max()) == 0.0  # the point's owner slot alone holds it
+    amp = radar_amplitude(torch.as_tensor(rcs), torch.as_tensor(np.linalg.norm(tx, axis=-1)),
+                          torch.as_tensor(np.linalg.norm(rx, axis=-1)), radar.wavelength_m, **AMP).numpy()
+    adc = _adc_profiles(radar, short_chain, tx, rx, amp, times)
+    err = (prof[0, 5].to(torch.complex64) - adc).abs().max() / adc.abs().max()
+    assert err < 1e-4
+
+
+def _bone_on_axis_window(times, z0, v_away, bone=8):
+    """A standard hand translating along z whose bone ``bone`` has its midpoint on the z axis."""
+    h = standard_hand()
+    mid = 0.5 * (h[BONE_PARENT[bone]] + h[BONE_CHILD[bone]])
+    pos = np.zeros((len(times), 2, 21, 3), np.float32)
+    pos[:, 0] = h - mid + np.stack([0 * times, 0 * times, z0 + v_away * times], -1)[:, None, :]
+    mask = np.zeros((len(times), 2), bool)
+    mask[:, 0] = True
+    return torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
+
+
+# velocities whose Doppler lands well inside a row (13.06 rows per m/s): the beat tone's phase across
+# the fast-time window (range migration) moves the line by ~1 %, which decides a row only at x.5
+@pytest.mark.parametrize("v_away", [-0.45, -0.15, 0.3, 0.62])
+def test_single_cylinder_doppler_line_at_closed_form_row(radar, short_chain, v_away):
+    times = _steps(radar, short_chain)
+    sim = Simulator(radar, short_chain)
+    pos, mask = _bone_on_axis_window(times, 0.40 if v_away < 0 else 0.18, v_away)
+    w = torch.zeros(1, len(times), 38)
+    w[..., 8] = 1.0  # one cylinder: the middle finger's proximal bone
+    spec = sim(pos, mask, w)[0]
+    v_toward = -v_away
+    expected = round(2 * v_toward / radar.wavelength_m * short_chain.stft_len * radar.loop_period_s) + short_chain.stft_len // 2
+    assert spec.argmax(0).tolist() == [expected] * short_chain.n_columns
+
+
+def test_weights_are_upsampled_in_time_not_by_chirp_index(radar, short_chain):
+    times = _steps(radar, short_chain)
+    ct = window_chirp_times(radar, short_chain)
+    ramp = torch.as_tensor(np.broadcast_to(times[None, :, None], (1, len(times), 38)).copy())
+    up = upsample_to_chirps(ramp, torch.as_tensor(times), torch.as_tensor(ct))
+    assert up.shape == (1, 38, *ct.shape)
+    expected = np.clip(ct, times[0], times[-1])
+    np.testing.assert_allclose(up[0, 3].numpy(), expected, atol=1e-12)
+    # across a frame gap the value jumps by the idle time, as the clock does
+    gap = float(up[0, 0, 1, 0, 0] - up[0, 0, 0, -1, 0])
+    assert gap > 100 * radar.chirp_period_s
+    x = torch.randn(2, len(times), 3, dtype=torch.float64)
+    np.testing.assert_allclose(interpolate_time(x, torch.as_tensor(times), torch.as_tensor(times[3:7])).numpy(),
+                               x[:, 3:7].numpy())
+
+
+def test_combine_slots_matches_explicit_sum_and_float16_cache(radar, short_chain):
+    times = _steps(radar, short_chain)
+    pos, mask = window(times, hands=2)
+    sim = Simulator(radar, short_chain)
+    prof = sim.slot_profiles(torch.as_tensor(pos[None]), torch.as_tensor(mask[None]))
+    w = 0.5 + torch.rand(1, len(times), 38)
+    wc = sim.upsample(w)
+    explicit = (prof[:, :38] * wc[..., None]).sum(1) + prof[:, 38]
+    fast = combine_slots(prof, wc)
+    torch.testing.assert_close(fast, explicit, rtol=1e-5, atol=1e-6 * float(explicit.abs().max()))
+    packed, scale = pack(prof)
+    assert packed.dtype == torch.float16 and packed.shape == (*prof.shape, 2)
+    from_cache = sim.combine(packed, w, scale=scale)
+    rel = (from_cache - explicit).abs().max() / explicit.abs().max()
+    assert rel < 2e-3
+    s_full = sim.spectrogram(explicit)
+    s_cache = sim.spectrogram(from_cache)
+    assert (s_full - s_cache).abs().max() < 0.01
+    active = torch.zeros(38, dtype=torch.bool)
+    active[:19] = True
+    right_only = sim.slot_profiles(torch.as_tensor(pos[None]), torch.as_tensor(np.stack([mask[:, 0], 0 * mask[:, 1]], -1)[None]))
+    torch.testing.assert_close(sim.combine(right_only, w, active=active), sim.combine(right_only, w))
+
+
+def test_simulator_uses_the_shared_chain_and_is_batch_consistent(radar, short_chain):
+    times = _steps(radar, short_chain)
+    sk, mk = zip(*[window(times, hands=h, seed=s) for h, s in ((1, 0), (2, 1))])
+    sk, mk = torch.as_tensor(np.stack(sk)), torch.as_tensor(np.stack(mk))
+    sim = Simulator(radar, short_chain)
+    spec = sim(sk, mk)
+    assert spec.shape == (2, short_chain.stft_len, short_chain.n_columns)
+    assert float(spec.min()) >= 0 and float(spec.max()) == 1.0
+    prof = sim.slot_profiles(sk, mk)
+    torch.testing.assert_close(spec, spectrogram_from_profiles(prof.sum(1), short_chain))
+    torch.testing.assert_close(sim(sk[1:], mk[1:])[0], spec[1], atol=1e-5, rtol=0)
+    # the untracked left hand of example 0 reflects nothing
+    assert float(prof[0, 19:38].abs().max()) == 0.0 and float(prof[1, 19:38].abs().max()) > 0
+
+
+def test_chirp_times_of_the_window(radar, chain):
+    ct = window_chirp_times(radar, chain)
+    assert ct.shape == (16, 128, 1)
+    assert math.isclose(ct[1, 0, 0] - ct[0, 0, 0], radar.frame_period_s)
+
+
+def test_interpolation_paths_agree():
+    """Sparse-matrix path (fixed times) and index path (differentiable times) give the same values."""
+    from handradar.sim.interp import interp_weights, lerp
+
+    t = torch.arange(20, dtype=torch.float64) / 100
+    new = torch.linspace(-0.01, 0.2, 57, dtype=torch.float64)
+    x = torch.randn(3, 20, 4, 2, dtype=torch.float64)
+    lo, frac = interp_weights(t, new)
+    fixed = lerp(x, lo, frac)
+    moving = lerp(x, lo, frac.clone().requires_grad_(True))
+    batched = lerp(x, lo.expand(3, -1), frac.expand(3, -1))
+    torch.testing.assert_close(fixed, moving.detach())
+    torch.testing.assert_close(fixed, batched)
+    np.testing.assert_allclose(fixed[:, 0].numpy(), x[:, 0].numpy())  # clamped before the first step
+    # samples moved to t_i - d: the value at t is x(t + d), whose derivative in d is dx/dt
+    shift = torch.tensor(0.0031, dtype=torch.float64, requires_grad=True)
+    y = interpolate_time(x, t - shift, torch.tensor([0.055], dtype=torch.float64))
+    (g,) = torch.autograd.grad(y.sum(), shift)
+    slope = (x[:, 6] - x[:, 5]).sum() / 0.01
+    assert float(g) == pytest.approx(float(slope), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_compiled_weighted_sum_equals_eager(radar, short_chain):
+    times = _steps(radar, short_chain)
+    pos, mask = window(times, hands=2)
+    sim = Simulator(radar, short_chain)
+    fast = Simulator(radar, short_chain, compile_combine=True)
+    prof = sim.slot_profiles(torch.as_tensor(pos[None]), torch.as_tensor(mask[None]))
+    packed, scale = pack(prof)
+    w = 0.5 + torch.rand(1, len(times), 38)
+    torch.testing.assert_close(fast.combine(packed, w, scale=scale), sim.combine(packed, w, scale=scale), rtol=1e-5, atol=1e-9)
+
+
+def test_tracking_gap_neither_sweeps_through_the_origin_nor_reflects(radar, short_chain):
+    from handradar.sim.simulator import hold_untracked
+
+    times = _steps(radar, short_chain)
+    pos, mask = window(times, hands=1)
+    mask[21:25, 0] = False  # inside frame 2 (0.2-0.25 s carries chirps)
+    pos[21:25, 0] = 0.0
+    held = hold_untracked(torch.as_tensor(pos[None]), torch.as_tensor(mask[None]))[0]
+    torch.testing.assert_close(held[21:25, 0], torch.as_tensor(pos[20:21, 0]).expand(4, 21, 3))
+    assert float(held[:, 1].abs().max()) == 0.0  # the never-tracked hand stays zero
+    sim = Simulator(radar, short_chain)
+    prof = sim.slot_profiles(torch.as_tensor(pos[None]), torch.as_tensor(mask[None]))
+    # nothing reflects while the hand is untracked: the chirps strictly between steps 21 and 24
+    ct = window_chirp_times(radar, short_chain).reshape(-1)
+    inside = (ct > times[21] + 1e-9) & (ct < times[24] - 1e-9)
+    flat = prof[0, :19].reshape(19, -1, prof.shape[-1])
+    assert inside.any() and float(flat[:, torch.as_tensor(inside)].abs().max()) == 0.0
