@@ -334,6 +334,11 @@ class Pose:
     present: np.ndarray
     geometry: HandGeometry
 
+    def palm_centres(self) -> np.ndarray:
+        """(T, 2, 3) centre of each palm, radar frame (metres)."""
+        local = PALM_CENTRE * self.geometry.scale
+        return self.joints[:, :, 0] + np.einsum("thij,j->thi", self.rotations, local)
+
 
 def _tremor(rng: np.random.Generator, kin: Kinematics) -> Callable[[np.ndarray], np.ndarray]:
     """Physiological tremor (8-12 Hz) and slow postural drift of one hand: t (T,) -> (T, 3) metres."""
