@@ -56,7 +56,7 @@ _LENGTHS = np.array([[0.044, 0.032, 0.027], [0.040, 0.024, 0.020], [0.045, 0.028
                      [0.042, 0.027, 0.021], [0.033, 0.019, 0.018]])
 _RADIUS_REL = np.array([1.12, 1.0, 1.02, 0.97, 0.86])  # finger thickness relative to finger_radius_m
 # Rest angles per chain: [abduction, flex1, flex2, flex3] (radians; thumb: CMC abd, CMC flex, MCP, IP).
-REST = np.array([[0.55, 0.15, 0.20, 0.15], [-0.10, 0.12, 0.18, 0.12], [0.0, 0.12, 0.18, 0.12],
+REST = np.array([[0.0, 0.15, 0.15, 0.10], [-0.10, 0.12, 0.18, 0.12], [0.0, 0.12, 0.18, 0.12],
                  [0.08, 0.14, 0.20, 0.13], [0.18, 0.16, 0.22, 0.15]])
 PALM_CENTRE = np.array([0.0, 0.055, 0.0])  # hand-local, scale 1
 
@@ -78,8 +78,8 @@ def _finger_base_frames() -> np.ndarray:
     frames = []
     for f in range(5):
         if f == 0:  # thumb: points forward-outward, tilted towards the palm; flexes across the palm
-            d = np.array([-0.62, 0.70, -0.35])
-            up = np.array([-0.45, -0.10, 0.90])
+            d = np.array([-0.65, 0.75, -0.10])
+            up = np.array([-0.90, 0.0, 0.45])
         else:  # fingers splay slightly outward from the hand axis
             d = np.array([_BASES[f, 0] * 1.6, 1.0, 0.0])
             up = np.array([0.0, 0.0, 1.0])
@@ -167,7 +167,7 @@ def _grasp(u, a, style):
     p = _program(len(u))
     c = smooth(u / 0.38) * smooth((1.0 - u) / 0.38)
     p.angles[:, 1:, 1:] += c[:, None, None] * a * np.array([1.35, 1.5, 1.0])
-    p.angles[:, 0] += c[:, None] * a * np.array([-0.35, 0.55, 0.65, 0.6])
+    p.angles[:, 0] += c[:, None] * a * np.array([0.0, 0.4, 0.45, 0.35])
     p.offset[:, 2] += 0.012 * a * c
     p.rotvec[:, 0] += 0.12 * a * c
     return [p]
@@ -177,7 +177,7 @@ def _finger_friction(u, a, style):
     p = _program(len(u))
     pose = smooth(u / 0.18) * smooth((1.0 - u) / 0.18)
     p.angles[:, 1:3] += pose[:, None, None] * np.array([0.0, 0.55, 0.75, 0.5])
-    p.angles[:, 0] += pose[:, None] * np.array([-0.35, 0.65, 0.35, 0.2])
+    p.angles[:, 0] += pose[:, None] * np.array([0.0, 0.45, 0.3, 0.2])
     rub = np.sin(2 * np.pi * 4.0 * _clip(u) + style) * envelope(u, 0.22) * a
     p.angles[:, 0, 2] += 0.32 * rub
     p.angles[:, 0, 3] += 0.30 * rub
@@ -201,13 +201,14 @@ def _circle_offset(u, radius, turns, tilt_deg, sign=1.0, phase=0.0):
     e1 = np.array([1.0, 0.0, 0.0])
     tilt = np.deg2rad(tilt_deg)
     e2 = np.array([0.0, np.cos(tilt), np.sin(tilt)])
-    return radius * ((np.cos(phi) - np.cos(phase))[:, None] * e1 + (np.sin(phi) - np.sin(phase))[:, None] * e2)
+    # centred on the rest position: the hand waits on the circle before and after drawing it
+    return radius * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
 
 
 def _pointing(p: HandProgram, amount: np.ndarray) -> None:
     p.angles[:, 1, 1:] -= amount[:, None] * REST[1, 1:]  # index straight
     p.angles[:, 2:, 1:] += amount[:, None, None] * np.array([1.3, 1.4, 0.9])
-    p.angles[:, 0] += amount[:, None] * np.array([-0.25, 0.45, 0.5, 0.4])
+    p.angles[:, 0] += amount[:, None] * np.array([0.0, 0.35, 0.4, 0.3])
 
 
 def _circle(u, a, style):
