@@ -88,3 +88,16 @@ def test_fast_path_is_the_adc_path_in_the_range_bin_domain(world, radar, chain):
     s_ref, start_ref = capture_spectrogram(ref, sim.radar, chain)
     assert start_fast == start_ref
     assert float((s_fast - s_ref).abs().max()) < 0.01
+
+
+@pytest.mark.parametrize("stage", ["slow_time", "adc"])
+def test_fast_path_models_iq_imbalance_like_the_adc_path(world, radar, chain, stage):
+    w = dataclasses.replace(world, capture_frames=3)
+    w = dataclasses.replace(w, effects=w.effects.with_("iq_imbalance", enabled=True, stage=stage)
+                            .with_("noise", quantisation=False))
+    spec = RecordingSpec("grasp", 0, 0.0, 0)
+    sim = simulate(w, radar, spec)
+    ref = range_profiles_from_adc(torch.as_tensor(simulate_adc(sim, w)), sim.radar, chain)
+    sim = simulate(w, radar, spec)
+    fast = fast_profiles(sim.tracks, sim.radar, chain, 3, w.effects, sim.rng_noise, sim.rng_quant, sim.noise_sigma)
+    assert float((fast - ref).abs().pow(2).mean() / ref.abs().pow(2).mean()) < 1e-5

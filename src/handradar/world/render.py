@@ -142,7 +142,7 @@ def fast_profiles(tracks: ScatterTracks, radar: RadarConfig, chain: ChainConfig,
     bins = np.concatenate([gated, (n - gated) % n]) if mirror else gated
     t = chirp_times(radar, n_frames)
     nu_max = float(radar.beat_frequency_hz(tracks.ranges.max()) / radar.sample_rate_hz) + 0.05
-    table, step = response_table(radar, chain, bins, max(nu_max, 1.0 + 2.0 / n) if mirror else nu_max)
+    table, step = response_table(radar, chain, bins, nu_max)
     table = table.to(torch.complex64)
     prof = torch.empty((n_frames, radar.chirps_per_frame, len(bins)), dtype=torch.complex64)
     for f in range(n_frames):
