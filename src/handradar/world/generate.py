@@ -30,7 +30,7 @@ from tqdm.auto import tqdm
 from handradar.data.examples import skeleton_steps, window_times
 from handradar.data.hdf5 import open_writer
 from handradar.data.recording import GESTURES, RecordingMeta, write_meta
-from handradar.hand.leap import read_leap_jsonl, write_leap_jsonl
+from handradar.hand.leap import write_leap_jsonl
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig, capture_spectrogram
 from handradar.radar.config import RadarConfig
@@ -145,7 +145,7 @@ def write_recording(world: Any, radar: RadarConfig, spec: RecordingSpec, folder:
     try:
         (tmp / "radar.cfg").write_text(sim.radar.to_cfg(), encoding="utf-8")
         write_adc(tmp / "adc_data.bin", adc, sim.radar)
-        write_leap_jsonl(tmp / "leap.jsonl", sim.leap.frames)
+        write_leap_jsonl(tmp / "leap.jsonl", sim.leap.frames())
         write_meta(tmp, sim.meta, truth=sim.truth)
         if folder.exists():
             shutil.rmtree(folder)
@@ -162,10 +162,7 @@ def fast_example(world: Any, radar: RadarConfig, chain: ChainConfig, spec: Recor
     profiles = fast_profiles(sim.tracks, sim.radar, chain, sim.radar.n_frames, world.effects, sim.rng_noise,
                              sim.rng_quant, sim.noise_sigma)
     spec_map, start = capture_spectrogram(profiles, sim.radar, chain)
-    with tempfile.TemporaryDirectory() as tmp:  # the skeleton goes through the file format, as ingest reads it
-        path = Path(tmp) / "leap.jsonl"
-        write_leap_jsonl(path, sim.leap.frames)
-        seq = read_leap_jsonl(path, np.asarray(sim.meta.leap_to_radar), sim.meta.radar_start_us)
+    seq = sim.leap.as_read()  # exactly what ingest would read from the recording's leap.jsonl
     t0 = start * sim.radar.frame_period_s
     rel = window_times(chain.frames_per_window(sim.radar), sim.radar.frame_period_s, world.skeleton_rate_hz)
     window = seq.resample(t0 + rel)

@@ -93,8 +93,8 @@ def iq_coefficients(iq: IQImbalance) -> tuple[complex, complex]:
 
 def receiver_noise(rng: np.random.Generator, shape: tuple[int, ...], sigma: float) -> np.ndarray:
     """Circular complex Gaussian noise of total power sigma^2 per sample (complex64)."""
-    z = rng.standard_normal(shape + (2,), dtype=np.float64) * (sigma / math.sqrt(2))
-    return (z[..., 0] + 1j * z[..., 1]).astype(np.complex64)
+    z = rng.standard_normal(shape + (2,), dtype=np.float32) * np.float32(sigma / math.sqrt(2))
+    return z.view(np.complex64)[..., 0]
 
 
 def chirp_times(radar: RadarConfig, n_frames: int) -> np.ndarray:

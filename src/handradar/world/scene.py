@@ -226,6 +226,13 @@ def amplitude_scale(scene: Scene) -> float:
     return scene.ref_counts * REF_RANGE_M ** 2 / np.sqrt(REF_RCS_M2)
 
 
+def first_hits(vertices: np.ndarray, faces: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    """Index of the first triangle hit by rays from the origin along ``dirs`` (-1: none); trimesh's
+    ray intersector, Embree (embreex) where installed."""
+    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
+    return mesh.ray.intersects_first(np.zeros_like(dirs), dirs)
+
+
 def visibility(surfaces: Surfaces, centroids: np.ndarray, front: np.ndarray, every: int = 1) -> np.ndarray:
     """(T, F) in [0, 1]: 1 where the ray from the antenna (origin) to a front-facing centroid first hits
     its own facet. Rays are cast at every ``every``-th step (and the last); steps in between are
@@ -237,17 +244,9 @@ def visibility(surfaces: Surfaces, centroids: np.ndarray, front: np.ndarray, eve
         idx = np.flatnonzero(front[t])
         if not len(idx):
             continue
-        mesh = trimesh.Trimesh(surfaces.vertices[t], surfaces.faces, process=False, validate=False)
         dirs = _unit(centroids[t, idx])
-        hit = mesh.ray.intersects_first(np.zeros_like(dirs), dirs)
-        hits[i, idx] = hit == idx
-    if len(cast) == t_steps:
-        return hits
-    steps = np.arange(t_steps)
-    hi = np.clip(np.searchsorted(cast, steps, side="right"), 1, len(cast) - 1)
-    lo = hi - 1
-    frac = ((steps - cast[lo]) / (cast[hi] - cast[lo]))[:, None]
-    return hits[lo] * (1 - frac) + hits[hi] * frac
+        hits[i, idx] = first_hits(surfaces.vertices[t], surfaces.faces, dirs) == idx
+    return _lerp(cast, hits, t_steps)
 
 
 # ---- tracks ----------------------------------------------------------------------------------------
@@ -351,6 +350,17 @@ def static_tracks(times: np.ndarray, clutter: StaticClutter, scene: Scene) -> Sc
                          np.full(len(ranges), STATIC), np.asarray(["leakage"] + ["static"] * (len(ranges) - 1)))
 
 
+def _lerp(steps: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Values (len(steps), K) at integer steps -> (n, K) by linear interpolation."""
+    if len(steps) == n:
+        return values
+    idx = np.arange(n)
+    hi = np.clip(np.searchsorted(steps, idx, side="right"), 1, len(steps) - 1)
+    lo = hi - 1
+    frac = ((idx - steps[lo]) / (steps[hi] - steps[lo]))[:, None]
+    return values[lo] * (1 - frac) + values[hi] * frac
+
+
 def scene_tracks(pose: Pose, effects: Effects, scene: Scene, rng: np.random.Generator) -> ScatterTracks:
     """All scatterers of one recording at the pose times (physics rate)."""
     surf = build_surfaces(pose, effects, scene)
@@ -367,7 +377,11 @@ def scene_tracks(pose: Pose, effects: Effects, scene: Scene, rng: np.random.Gene
     parts = [ScatterTracks(pose.times, r, amp, np.full(len(labels), DIRECT), labels)]
     if effects.multipath.enabled:
         pick, rep = _sample_facets(rng, area[0], surf.slot, effects.multipath.samples_per_hand)
-        br, ba, bl = bounce_paths(c[:, pick], n[:, pick], vis[:, pick], surf.slot[pick], rep, effects, scene)
+        # double bounces are evaluated at the visibility rate and interpolated linearly in between
+        steps = np.unique(np.r_[np.arange(0, len(pose.times), every), len(pose.times) - 1])
+        sub = np.ix_(steps, pick)
+        br, ba, bl = bounce_paths(c[sub], n[sub], vis[sub], surf.slot[pick], rep, effects, scene)
+        br, ba = (_lerp(steps, x, len(pose.times)) for x in (br, ba))
         parts.append(ScatterTracks(pose.times, br, ba, np.full(len(bl), BOUNCE), np.asarray(bl, dtype=str)))
     tracks = ScatterTracks.concat(parts)
     peak = np.abs(tracks.amplitudes).max(0)

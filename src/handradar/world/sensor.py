@@ -41,11 +41,38 @@ def nominal_leap_to_radar() -> np.ndarray:
 
 @dataclass
 class LeapObservation:
-    frames: list[dict]  # Leap frame dicts, ready for write_leap_jsonl
+    """One recording's Leap stream: what the sensor measured, on its own clock."""
+
+    stamps_us: np.ndarray  # (T,) int64 Leap timestamps
+    radar_nominal: np.ndarray  # (T, 2, 21, 3) measured joints mapped with the nominal calibration, metres
+    mask: np.ndarray  # (T, 2) tracked hands
     radar_start_us: int  # nominal (meta.json)
     sync_offset_s: float  # true radar start - nominal, seconds
     leap_to_radar_true: np.ndarray
     dropped: int
+
+    def sequence(self) -> HandSequence:
+        """The measured stream in the nominal radar frame, times on the nominal radar clock."""
+        seq = HandSequence(self.radar_nominal, (self.stamps_us - self.radar_start_us) * 1e-6, self.mask,
+                           source="world-leap")
+        seq.positions = self.radar_nominal  # keep float64: the file must hold exactly the measured millimetres
+        return seq
+
+    def frames(self) -> list[dict]:
+        """Leap frame dicts (handradar.hand.leap), ready for write_leap_jsonl."""
+        return list(leap_frames_from_sequence(self.sequence(), np.linalg.inv(nominal_leap_to_radar()),
+                                              self.radar_start_us))
+
+    def as_read(self) -> HandSequence:
+        """What read_leap_jsonl returns for the written file, without writing it: the writer rounds
+        the millimetres to 3 decimals and the reader maps them with meta.json's matrix."""
+        m = nominal_leap_to_radar()
+        inv = np.linalg.inv(m)
+        mm = (self.radar_nominal @ inv[:3, :3].T + inv[:3, 3]).round(3)  # as leap_frames_from_sequence writes
+        mm[~self.mask] = 0.0  # untracked hands are absent from the file; the reader holds zeros
+        radar = mm @ m[:3, :3].T + m[:3, 3]
+        return HandSequence(radar.astype(np.float32), (self.stamps_us - float(self.radar_start_us)) * 1e-6,
+                            self.mask, source="world-leap")
 
 
 def _ar1(rng: np.random.Generator, shape: tuple[int, ...], dt: np.ndarray, tau: float) -> np.ndarray:
@@ -105,10 +132,6 @@ def observe(motion: Motion, capture_s: float, leap: LeapSensor, effects: Effects
         drop[[0, -1]] = False  # readers need the span covered
         mask[drop] = False
         dropped = int(drop.sum())
-    # express what the Leap measured in the nominal radar frame, then write it back with the nominal
-    # inverse: the file holds exactly the measured millimetres
+    # what the Leap measured, in the nominal radar frame (written back with the nominal inverse)
     radar_nominal = mm @ nominal[:3, :3].T + nominal[:3, 3]
-    seq = HandSequence(radar_nominal.astype(np.float64), t_reader, mask, source="world-leap")
-    seq.positions = radar_nominal  # keep float64 through the round trip
-    frames = list(leap_frames_from_sequence(seq, np.linalg.inv(nominal), start_us))
-    return LeapObservation(frames, start_us, offset, true, dropped)
+    return LeapObservation(stamps, radar_nominal, mask, start_us, offset, true, dropped)
