@@ -16,7 +16,7 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -96,7 +96,8 @@ def simulate(world: WorldConfig, radar: RadarConfig, spec: RecordingSpec) -> Sim
     capture_s = cap.n_frames * cap.frame_period_s
     subj = subject(world, spec.subject)
     kin_ss, scene_ss, leap_ss, noise_ss, quant_ss = np.random.SeedSequence(world.seed, spawn_key=(2, *spec.key())).spawn(5)
-    motion = Motion(spec.gesture, subj, spec.angle_deg, capture_s, world.kinematics, np.random.default_rng(kin_ss))
+    motion = Motion(spec.gesture, subj, spec.angle_deg, capture_s, world.kinematics, np.random.default_rng(kin_ss),
+                    forearm_m=world.effects.forearm.length_m)
     dt = 1.0 / world.scene.rate_hz
     times = np.arange(-2 * dt, capture_s + 2.5 * dt, dt)
     tracks = scene_tracks(motion.pose(times), world.effects, world.scene, np.random.default_rng(scene_ss))
@@ -203,8 +204,10 @@ def _run_parallel(fn: Callable, jobs: list, workers: int, progress: bool, desc: 
 
 
 def dataset_path(world: Any, radar: RadarConfig, chain: ChainConfig, cache_dir: str | Path) -> tuple[Path, str]:
+    """Cache file of the world's dataset and its config hash (radar, chain, world physics, generator version)."""
     world = world_config(world)
-    h = config_hash(world.to_dict(), capture_radar(radar, world), chain, WORLD_VERSION, "fast-path")
+    physics = {k: v for k, v in world.to_dict().items() if k != "workers"}  # workers do not change the data
+    h = config_hash(physics, capture_radar(radar, world), chain, WORLD_VERSION, "fast-path")
     return Path(cache_dir) / f"world_{h}.h5", h
 
 
@@ -213,8 +216,9 @@ def build_world_dataset(world_cfg: Any, radar: RadarConfig, chain: ChainConfig, 
     """The world's HDF5 dataset (handradar.dataset/1) via the fast path; cached by config hash.
 
     world_cfg: the ``world`` config node (DictConfig / dict) or a WorldConfig. Returns the cached
-    file when it exists; otherwise builds it with ``world.workers`` processes. An interrupted
-    build leaves nothing behind.
+    file when it exists; otherwise builds it with ``world.workers`` processes (spawned: a calling
+    script needs the usual ``if __name__ == "__main__":`` guard). An interrupted build leaves
+    nothing behind.
     """
     world = world_config(world_cfg)
     path, h = dataset_path(world, radar, chain, cache_dir)
@@ -243,9 +247,4 @@ def write_world_recordings(world_cfg: Any, radar: RadarConfig, out: str | Path, 
     for _ in _run_parallel(write_recording, jobs, world.workers, progress, "world recordings"):
         pass
     return [out / s.name for s in specs]
-
-
-def iter_specs(world: WorldConfig, **match: Any) -> Iterable[RecordingSpec]:
-    """Specs whose fields equal the given values (e.g. ``gesture='grasp'``)."""
-    return (s for s in recording_specs(world) if all(getattr(s, k) == v for k, v in match.items()))
 

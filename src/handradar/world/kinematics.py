@@ -361,7 +361,7 @@ class Motion:
     """One recording's true hand motion, evaluated at any times (seconds on the radar clock)."""
 
     def __init__(self, gesture: str, subject: Subject, angle_deg: float, capture_s: float, kin: Kinematics,
-                 rng: np.random.Generator) -> None:
+                 rng: np.random.Generator, forearm_m: float = 0.26) -> None:
         if gesture not in PROGRAMS:
             raise ValueError(f"unknown gesture {gesture!r}; expected one of {GESTURES}")
         self.gesture = gesture
@@ -395,7 +395,7 @@ class Motion:
             side = 1.0 if slot == 0 else -1.0
             wrist0 = self._wrist(prog, 0, side)
             back = self.base @ np.array([0.06 * side, -0.93, -0.36])
-            self.elbows[slot] = wrist0 + 0.26 * subject.geometry.scale * back / np.linalg.norm(back)
+            self.elbows[slot] = wrist0 + forearm_m * subject.geometry.scale * back / np.linalg.norm(back)
 
     def _programs(self, t: np.ndarray) -> list[HandProgram]:
         u = (t - self.start_s) / self.duration_s
