@@ -58,7 +58,7 @@ class ChainConfig:
     stft_len: int = 64
     stft_hop: int = 64
     n_columns: int = 32
-    dynamic_range_db: float = 40.0
+    dynamic_range_db: float = 30.0
     clutter_removal: bool = True
 
     def __post_init__(self) -> None:
