@@ -30,17 +30,23 @@ def _mlp(sizes: Sequence[int], *, batch_norm: bool, dropout: float) -> list[nn.M
 
 
 class Generator(nn.Module):
-    """(noise (B, latent_dim), labels (B,)) -> spectrograms (B, 1, 64, 32) in [0, 1]."""
+    """(noise (B, latent_dim), labels (B,)) -> spectrograms (B, 1, 64, 32) in [0, 1].
+
+    As in Mirza and Osindero, noise and one-hot label first pass through separate hidden layers
+    (``hidden[0]`` units each), whose outputs are concatenated and mapped by the joint layers.
+    """
 
     def __init__(self, num_classes: int, *, latent_dim: int = 64, hidden: Sequence[int] = (256, 512, 1024),
                  shape: Sequence[int] = (1, 64, 32)) -> None:
         super().__init__()
         self.num_classes, self.latent_dim, self.shape = num_classes, latent_dim, tuple(shape)
-        self.body = nn.Sequential(*_mlp([latent_dim + num_classes, *hidden], batch_norm=True, dropout=0.0),
+        self.z_in = nn.Sequential(*_mlp([latent_dim, hidden[0]], batch_norm=True, dropout=0.0))
+        self.y_in = nn.Sequential(*_mlp([num_classes, hidden[0]], batch_norm=False, dropout=0.0))
+        self.body = nn.Sequential(*_mlp([2 * hidden[0], *hidden[1:]], batch_norm=True, dropout=0.0),
                                   nn.Linear(hidden[-1], prod(self.shape)))
 
     def forward(self, z: torch.Tensor, labels: torch.Tensor) -> torch.Tensor:
-        h = torch.cat([z, F.one_hot(labels, self.num_classes).to(z.dtype)], dim=1)
+        h = torch.cat([self.z_in(z), self.y_in(F.one_hot(labels, self.num_classes).to(z.dtype))], dim=1)
         return torch.sigmoid(self.body(h)).view(-1, *self.shape)
 
     @torch.no_grad()
@@ -56,15 +62,21 @@ class Generator(nn.Module):
 
 
 class Discriminator(nn.Module):
-    """(spectrograms (B, 1, 64, 32), labels (B,)) -> real/fake logits (B,)."""
+    """(spectrograms (B, 1, 64, 32), labels (B,)) -> real/fake logits (B,).
 
-    def __init__(self, num_classes: int, *, hidden: Sequence[int] = (512, 256), dropout: float = 0.3,
-                 shape: Sequence[int] = (1, 64, 32)) -> None:
+    Spectrogram and one-hot label pass through separate hidden layers (``hidden[0]`` and
+    ``label_units`` units) before the joint layers, so the label is not drowned among 2048 pixels.
+    """
+
+    def __init__(self, num_classes: int, *, hidden: Sequence[int] = (512, 256), label_units: int = 64,
+                 dropout: float = 0.3, shape: Sequence[int] = (1, 64, 32)) -> None:
         super().__init__()
         self.num_classes = num_classes
-        self.body = nn.Sequential(*_mlp([prod(shape) + num_classes, *hidden], batch_norm=False, dropout=dropout),
-                                  nn.Linear(hidden[-1], 1))
+        self.x_in = nn.Sequential(*_mlp([prod(shape), hidden[0]], batch_norm=False, dropout=dropout))
+        self.y_in = nn.Sequential(*_mlp([num_classes, label_units], batch_norm=False, dropout=0.0))
+        self.body = nn.Sequential(*_mlp([hidden[0] + label_units, *hidden[1:]], batch_norm=False, dropout=dropout),
+                                  nn.Linear(hidden[-1] if len(hidden) > 1 else hidden[0] + label_units, 1))
 
     def forward(self, x: torch.Tensor, labels: torch.Tensor) -> torch.Tensor:
-        h = torch.cat([x.flatten(1), F.one_hot(labels, self.num_classes).to(x.dtype)], dim=1)
+        h = torch.cat([self.x_in(x.flatten(1)), self.y_in(F.one_hot(labels, self.num_classes).to(x.dtype))], dim=1)
         return self.body(h).squeeze(1)

@@ -49,6 +49,23 @@ class ClassifierModule(pl.LightningModule):
 
 
 @torch.no_grad()
+def recompute_bn_stats(net: nn.Module, x: np.ndarray, *, batch_size: int = 256,
+                       device: str | torch.device | None = None) -> None:
+    """Replace BatchNorm running statistics by the exact statistics of the final weights on ``x``
+    (precise BN). After short trainings on few examples the running averages still lag the
+    fast-moving weights, and an eval-mode network can collapse onto one class even though its
+    training-mode predictions are right."""
+    if not any(isinstance(m, nn.modules.batchnorm._BatchNorm) for m in net.modules()):
+        return
+    device = torch.device(device) if device is not None else next(net.parameters()).device
+    xt = torch.as_tensor(np.asarray(x, dtype=np.float32))[:, None]
+    loader = [xt[lo:lo + batch_size].to(device) for lo in range(0, len(xt), batch_size)]
+    was_training = net.training
+    torch.optim.swa_utils.update_bn(loader, net.to(device))
+    net.train(was_training)
+
+
+@torch.no_grad()
 def predict(net: nn.Module, x: np.ndarray, *, batch_size: int = 256, device: str | torch.device | None = None) -> np.ndarray:
     """Predicted class of each spectrogram (N, 64, 32) with the network in eval mode."""
     device = torch.device(device) if device is not None else next(net.parameters()).device

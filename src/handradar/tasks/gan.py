@@ -18,13 +18,17 @@ class CGANModule(pl.LightningModule):
     ``max_steps`` of a Trainer counts optimizer steps: two per batch here. Logs
     ``<prefix>d_loss`` and ``<prefix>g_loss`` per epoch. real_label < 1 is one-sided label
     smoothing (Salimans et al.), which keeps the discriminator from saturating on tiny data.
+    mismatch: also show the discriminator real spectrograms with wrong labels as fakes; on a few
+    dozen examples the plain CGAN often learns to ignore the label, this makes it learn it.
     """
 
     def __init__(self, generator: Generator, discriminator: Discriminator, *, lr: float = 2e-4,
-                 betas: Sequence[float] = (0.5, 0.999), real_label: float = 0.9, prefix: str = "gan/") -> None:
+                 betas: Sequence[float] = (0.5, 0.999), real_label: float = 0.9, mismatch: bool = True,
+                 prefix: str = "gan/") -> None:
         super().__init__()
         self.generator, self.discriminator = generator, discriminator
         self.lr, self.betas, self.real_label, self.prefix = lr, tuple(betas), real_label, prefix
+        self.mismatch = mismatch
         self.automatic_optimization = False
 
     def training_step(self, batch: tuple[torch.Tensor, torch.Tensor], batch_idx: int) -> None:
@@ -37,6 +41,12 @@ class CGANModule(pl.LightningModule):
         d_fake = self.discriminator(fake.detach(), y)
         d_loss = (F.binary_cross_entropy_with_logits(d_real, torch.full_like(d_real, self.real_label))
                   + F.binary_cross_entropy_with_logits(d_fake, torch.zeros_like(d_fake)))
+        if self.mismatch:
+            # real spectrograms with a wrong label are fakes too (matching-aware discriminator,
+            # Reed et al. 2016): the discriminator must read the label, so the generator must obey it
+            wrong = (y + torch.randint(1, self.generator.num_classes, y.shape, device=y.device)) % self.generator.num_classes
+            d_wrong = self.discriminator(x, wrong)
+            d_loss = d_loss + F.binary_cross_entropy_with_logits(d_wrong, torch.zeros_like(d_wrong))
         opt_d.zero_grad()
         self.manual_backward(d_loss)
         opt_d.step()

@@ -109,6 +109,7 @@ class Tracker:
         # NullPool: a pooled connection would keep the SQLite file open (and possibly locked)
         # between our serialised operations.
         os.environ.setdefault("MLFLOW_SQLALCHEMYSTORE_POOLCLASS", "NullPool")
+        os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
         from mlflow import MlflowClient
 
         db = sqlite_path(self.tracking_uri)

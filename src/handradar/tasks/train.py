@@ -43,7 +43,7 @@ from handradar.atomic import atomic_path, atomic_write_text
 from handradar.data.provision import ArrayDataset, file_hash, load_arrays
 from handradar.data.splits import Split, few_shot_split, make_split
 from handradar.provenance import code_version, config_hash
-from handradar.tasks.classify import ClassifierModule, evaluate
+from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
 from handradar.tasks.fitting import make_trainer, resumable_fit, tensor_loader
 from handradar.tasks.gan import CGANModule, sample_per_class
 from handradar.tasks.providers import load_synthetic
@@ -214,6 +214,8 @@ class Job:
         trainer = make_trainer(cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
                                callbacks=self._callbacks(), overrides=overrides)
         resumable_fit(trainer, module, loader, ckpt_dir)
+        if cfg.model.get("precise_bn", True):
+            recompute_bn_stats(module.net, x, device=self._eval_device())
         return module.net
 
     def train_and_test(self, name: str, x: np.ndarray, y: np.ndarray, test_rows: np.ndarray, num_classes: int,
@@ -281,7 +283,8 @@ class Job:
         pl.seed_everything(self.seed, verbose=False)
         gen = instantiate(cfg.generator, num_classes=n_classes, shape=(1, *x.shape[1:]))
         disc = instantiate(cfg.discriminator, num_classes=n_classes, shape=(1, *x.shape[1:]))
-        module = CGANModule(gen, disc, lr=float(cfg.lr), betas=tuple(cfg.betas), real_label=float(cfg.real_label))
+        module = CGANModule(gen, disc, lr=float(cfg.lr), betas=tuple(cfg.betas), real_label=float(cfg.real_label),
+                            mismatch=bool(cfg.get("mismatch", True)))
         loader = tensor_loader(x, y, batch_size=int(cfg.batch_size), seed=self.seed, drop_last=len(y) > int(cfg.batch_size))
         ckpt_dir = self.state / "cgan_generator" / "checkpoints"
         trainer = make_trainer(self.cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
