@@ -1,9 +1,1 @@
-"""One torch thread: the test machine is shared, and oversubscribed OpenMP threads run ~10x slower."""
-
-import pytest
-import torch
-
-
-@pytest.fixture(autouse=True, scope="session")
-def _one_torch_thread():
-    torch.set_num_threads(1)
+from tests.tasks.fakes import _one_torch_thread, fake_data  # noqa: F401  (shared fixtures)

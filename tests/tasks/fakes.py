@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import h5py
+import pytest
 import numpy as np
 import torch
 from lightning.pytorch.callbacks import Callback
@@ -109,8 +110,12 @@ def wrong_label_provider(real_path: Path, rows: np.ndarray, mode: str, *, fit_ro
     return path
 
 
+EXTERNAL_CALLS: list[str] = []
+
+
 def fake_external_provider(source_cfg, *, seed: int, cache_dir: Path) -> Path:
     """13 external classes (like SFINGE3D): class k uses the fake pattern of (k mod 10) shifted by k // 10 rows."""
+    EXTERNAL_CALLS.append(str(source_cfg["name"]))
     names = [f"ext{k:02d}" for k in range(13)]
     rng = np.random.default_rng(seed)
     y = np.repeat(np.arange(13), 8)
@@ -130,13 +135,22 @@ def tiny_cnn(num_classes: int) -> nn.Module:
 
 
 class CrashOnce(Callback):
-    """Raises at the end of training epoch ``epoch`` unless ``marker`` exists (then creates it)."""
+    """Raises at the end of training epoch ``epoch`` of the fit whose module logs under ``prefix``,
+    unless ``marker`` exists (then creates it). Appends "<prefix> <epoch>" to ``epoch_log`` at the
+    first batch of every epoch, so a test sees where a resumed fit started."""
 
-    def __init__(self, epoch: int, marker: str) -> None:
-        self.epoch, self.marker = epoch, Path(marker)
+    def __init__(self, epoch: int, marker: str, prefix: str, epoch_log: str) -> None:
+        self.epoch, self.marker, self.prefix, self.epoch_log = epoch, Path(marker), prefix, Path(epoch_log)
+
+    def on_train_batch_start(self, trainer, pl_module, batch, batch_idx) -> None:
+        if batch_idx:
+            return
+        with open(self.epoch_log, "a") as fh:
+            fh.write(f"{getattr(pl_module, 'prefix', '?')} {trainer.current_epoch}\n")
 
     def on_train_epoch_end(self, trainer, pl_module) -> None:
-        if trainer.current_epoch == self.epoch and not self.marker.exists():
+        if (getattr(pl_module, "prefix", None) == self.prefix and trainer.current_epoch == self.epoch
+                and not self.marker.exists()):
             self.marker.write_text("crashed")
             raise RuntimeError(f"simulated crash after epoch {self.epoch}")
 
@@ -149,3 +163,26 @@ def fake_overrides(data: Path, tmp: Path, *, logger: str = "none", extra: tuple[
             "synth.external_provider._target_=tests.tasks.fakes.fake_external_provider",
             f"logger={logger}", "trainer.max_steps=20", "cgan.max_steps=20", "print_table=false",
             *extra]
+
+
+def compose_train(overrides: list[str]):
+    """The train.py config composed with Hydra's compose API (as the entry point would)."""
+    from hydra import compose, initialize_config_dir
+
+    from handradar.config import VERSION_BASE, config_dir
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base=VERSION_BASE):
+        return compose("train", overrides=overrides)
+
+
+# ---- fixtures (imported by the conftest.py of tests/{config,experiments,models,tasks}) ----------
+@pytest.fixture(autouse=True, scope="session")
+def _one_torch_thread():
+    """One torch thread: the test machine is shared, and oversubscribed OpenMP threads run ~10x slower."""
+    torch.set_num_threads(1)
+
+
+@pytest.fixture(scope="session")
+def fake_data(tmp_path_factory) -> Path:
+    """10 gestures x 8 rows with full meta (subjects, angles, hands, occlusion) and skeletons."""
+    return write_fake_dataset(tmp_path_factory.mktemp("data") / "fake.h5", per_class=8)

@@ -31,6 +31,20 @@ from handradar.radar.config import RadarConfig
 log = logging.getLogger(__name__)
 
 
+def import_callable(dotted: str):
+    """``package.module.name`` -> the object; ImportError (with the reason) when it is missing."""
+    import importlib
+
+    module, _, name = dotted.rpartition(".")
+    try:
+        obj = getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as exc:
+        raise ImportError(f"{type(exc).__name__}: {exc}") from None
+    if not callable(obj):
+        raise ImportError(f"{dotted} is not callable")
+    return obj
+
+
 class HDF5Source:
     """An existing dataset file."""
 
@@ -90,11 +104,9 @@ class WorldSource:
         self.builder, self.radar, self.chain, self.cache_dir, self.world = builder, radar, chain, Path(cache_dir), world
 
     def path(self) -> Path:
-        from hydra.utils import get_method
-
         try:
-            build = get_method(self.builder)
-        except Exception as exc:
+            build = import_callable(self.builder)
+        except ImportError as exc:
             raise HandradarError(f"the reference-world generator '{self.builder}' is not available ({exc}); "
                                  "use data=hdf5 data.path=FILE.h5 or data=recordings data.root=DIR") from None
         out = Path(build(self.world, self.radar, self.chain, self.cache_dir))

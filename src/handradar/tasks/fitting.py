@@ -4,8 +4,8 @@ A fit is a function of the seed alone, also across an interruption: the shufflin
 epoch depends only on (seed, epoch) (:class:`EpochSeededSampler`, which Lightning advances through
 ``set_epoch``), and every training step reseeds torch's global generator from (seed, step, rank)
 (:class:`StepSeed`, so dropout masks and GAN noise do not depend on the history of the
-process). A fit resumes from ``<ckpt_dir>/last.ckpt`` (ModelCheckpoint ``save_last`` at every epoch
-end), so a job killed during epoch k repeats only epoch k and ends with the same weights.
+process). A fit resumes from ``<ckpt_dir>/last.ckpt`` (:class:`EpochStartCheckpoint`, rewritten as
+each epoch starts), so a job killed during epoch k repeats only epoch k and ends with the same weights.
 """
 
 from __future__ import annotations
@@ -19,9 +19,13 @@ import lightning.pytorch as pl
 import numpy as np
 import torch
 from hydra.utils import instantiate
-from lightning.pytorch.callbacks import Callback, ModelCheckpoint
+from lightning.pytorch.callbacks import Callback
+from lightning.pytorch.loggers.logger import Logger
+from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 from torch.utils.data import DataLoader, Sampler, TensorDataset
+
+from handradar.tasks.tracking import Tracker
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +57,24 @@ class StepSeed(Callback):
         torch.manual_seed((self.seed * 1_000_003 + trainer.global_step) * 64 + trainer.global_rank)
 
 
+class EpochStartCheckpoint(Callback):
+    """Write ``<dirpath>/last.ckpt`` at the start of every epoch after the first.
+
+    Not ModelCheckpoint's end-of-epoch file: Lightning restores such a file as an unfinished
+    epoch and replays one extra optimizer step (Lightning issue #19403), so a resumed fit would
+    not match an uninterrupted one. At the start of epoch k, epochs 0..k-1 are complete in the
+    loop state, and a restore continues exactly with epoch k.
+    """
+
+    def __init__(self, dirpath: str | Path) -> None:
+        self.path = Path(dirpath) / "last.ckpt"
+
+    def on_train_batch_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule, batch: Any, batch_idx: int) -> None:
+        if batch_idx == 0 and trainer.current_epoch > 0 and not trainer.fast_dev_run:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            trainer.save_checkpoint(self.path)  # collective under DDP; rank 0 writes, atomically
+
+
 def tensor_loader(x: np.ndarray, y: np.ndarray, *, batch_size: int, seed: int, shuffle: bool = True,
                   num_workers: int = 0, drop_last: bool = False) -> DataLoader:
     """Spectrograms (N, 64, 32) and labels (N,) as a loader of ((B, 1, 64, 32), (B,)) batches."""
@@ -65,10 +87,9 @@ def tensor_loader(x: np.ndarray, y: np.ndarray, *, batch_size: int, seed: int, s
 def make_trainer(trainer_cfg: DictConfig | Mapping, *, ckpt_dir: Path, seed: int, logger: Any = False,
                  callbacks: Sequence[Callback] = (), overrides: Mapping[str, Any] | None = None) -> pl.Trainer:
     """A Trainer from the ``trainer`` config plus checkpointing into ``ckpt_dir``."""
-    ckpt = ModelCheckpoint(dirpath=ckpt_dir, save_last=True, save_top_k=0, every_n_epochs=1,
-                           save_on_train_epoch_end=True, enable_version_counter=False)
     cfg = OmegaConf.merge(trainer_cfg, dict(overrides or {}))
-    return instantiate(cfg, callbacks=[*callbacks, StepSeed(seed), ckpt], logger=logger, default_root_dir=str(ckpt_dir))
+    return instantiate(cfg, callbacks=[*callbacks, StepSeed(seed), EpochStartCheckpoint(ckpt_dir)], logger=logger,
+                       default_root_dir=str(ckpt_dir), enable_checkpointing=False)
 
 
 def resumable_fit(trainer: pl.Trainer, module: pl.LightningModule, loader: DataLoader, ckpt_dir: Path) -> None:
@@ -77,3 +98,33 @@ def resumable_fit(trainer: pl.Trainer, module: pl.LightningModule, loader: DataL
     if last.is_file():
         log.info("resuming %s from %s", type(module).__name__, last)
     trainer.fit(module, train_dataloaders=loader, ckpt_path=str(last) if last.is_file() else None)
+
+
+class TrackerLogger(Logger):
+    """Lightning logger that writes epoch metrics into the job's MLflow run under a prefix.
+
+    The MLflow step of an epoch-level metric is its epoch (Lightning's own step counter for epoch
+    metrics shifts by one after a resume)."""
+
+    def __init__(self, tracker: Tracker, prefix: str = "") -> None:
+        super().__init__()
+        self.tracker = tracker
+        self.prefix = prefix
+
+    @property
+    def name(self) -> str:
+        return "mlflow"
+
+    @property
+    def version(self) -> str:
+        return self.tracker.run_id or "offline"
+
+    @rank_zero_only
+    def log_hyperparams(self, params: Any, *args: Any, **kwargs: Any) -> None:
+        """The job logs its whole config once; per-fit hyperparameters add nothing."""
+
+    @rank_zero_only
+    def log_metrics(self, metrics: Mapping[str, float], step: int | None = None) -> None:
+        if "epoch" in metrics:
+            step = int(metrics["epoch"])
+        self.tracker.log_metrics({f"{self.prefix}{k}": v for k, v in metrics.items() if k != "epoch"}, step)

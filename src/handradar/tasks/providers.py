@@ -27,7 +27,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from handradar.data.provision import ArrayDataset, load_arrays
+from handradar.data.provision import ArrayDataset, import_callable, load_arrays
 from handradar.errors import FormatError, HandradarError
 
 SIM_PROVIDER = "handradar.sim.provider.synthesize_rows"
@@ -35,11 +35,9 @@ SIM_EXTERNAL_PROVIDER = "handradar.sim.provider.synthesize_external"
 
 
 def _import(name: str, what: str):
-    from hydra.utils import get_method
-
     try:
-        return get_method(name)
-    except Exception as exc:
+        return import_callable(name)
+    except ImportError as exc:
         raise HandradarError(f"{what} '{name}' is not available in this build ({exc}); set synth.provider / "
                              "synth.external_provider to a callable with the contract of handradar.tasks.providers, "
                              "or drop the synthetic variants (variants=[radar_only,cgan])") from None

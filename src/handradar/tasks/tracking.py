@@ -10,7 +10,8 @@ lock (an ``mlflow ui`` reading the store). Stores that are not SQLite files (an 
 need no lock.
 
 :class:`Tracker` is picklable (the client is created lazily), so Lightning's ddp_spawn can carry
-it into worker processes through :class:`TrackerLogger`.
+it into worker processes through :class:`handradar.tasks.fitting.TrackerLogger`. This module does
+not import torch or Lightning (the table builder and the tests' worker processes start fast).
 """
 
 from __future__ import annotations
@@ -23,9 +24,6 @@ import time
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TypeVar
-
-from lightning.pytorch.loggers.logger import Logger
-from lightning.pytorch.utilities import rank_zero_only
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -186,28 +184,3 @@ class Tracker:
     def log_dict(self, obj: Any, name: str) -> None:
         if self.enabled:
             self._call(lambda c: c.log_dict(self.run_id, obj, name))
-
-
-class TrackerLogger(Logger):
-    """Lightning logger that writes epoch metrics into the job's MLflow run under a prefix."""
-
-    def __init__(self, tracker: Tracker, prefix: str = "") -> None:
-        super().__init__()
-        self.tracker = tracker
-        self.prefix = prefix
-
-    @property
-    def name(self) -> str:
-        return "mlflow"
-
-    @property
-    def version(self) -> str:
-        return self.tracker.run_id or "offline"
-
-    @rank_zero_only
-    def log_hyperparams(self, params: Any, *args: Any, **kwargs: Any) -> None:
-        """The job logs its whole config once; per-fit hyperparameters add nothing."""
-
-    @rank_zero_only
-    def log_metrics(self, metrics: Mapping[str, float], step: int | None = None) -> None:
-        self.tracker.log_metrics({f"{self.prefix}{k}": v for k, v in metrics.items() if k != "epoch"}, step)

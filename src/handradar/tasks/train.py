@@ -25,6 +25,7 @@ its last epoch checkpoint, skips finished variants and completes the same MLflow
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import logging
 import shutil
@@ -44,11 +45,11 @@ from handradar.data.provision import ArrayDataset, file_hash, load_arrays
 from handradar.data.splits import Split, few_shot_split, make_split
 from handradar.provenance import code_version, config_hash
 from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
-from handradar.tasks.fitting import make_trainer, resumable_fit, tensor_loader
+from handradar.tasks.fitting import TrackerLogger, make_trainer, resumable_fit, tensor_loader
 from handradar.tasks.gan import CGANModule, sample_per_class
 from handradar.tasks.providers import load_synthetic
 from handradar.tasks.report import job_table
-from handradar.tasks.tracking import TAG_PREFIX, Tracker, TrackerLogger, _flatten
+from handradar.tasks.tracking import TAG_PREFIX, Tracker, _flatten
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +72,15 @@ def job_hash(cfg: DictConfig, data_hash: str) -> str:
         return [strip(v) for v in o] if isinstance(o, list) else o
 
     return config_hash(strip(c), data_hash)
+
+
+def weights_hash(net: torch.nn.Module) -> str:
+    """SHA-256 (16 hex digits) of a network's parameters and buffers: equal iff bit-identical."""
+    h = hashlib.sha256()
+    for k, v in sorted(net.state_dict().items()):
+        h.update(k.encode())
+        h.update(v.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()[:16]
 
 
 def _is_rank_zero() -> bool:
@@ -224,7 +234,8 @@ class Job:
         ty = self.real.y[test_rows] if test_y is None else test_y
         acc, cm = evaluate(net, self.real.x[test_rows], ty, num_classes, device=self._eval_device())
         log.info("%s: test accuracy %.4f on %d rows", name, acc, len(ty))
-        return {"acc": acc, "confusion": cm.tolist(), "classes": classes, "n_train": int(len(y)), "n_test": int(len(ty))}
+        return {"acc": acc, "confusion": cm.tolist(), "classes": classes, "n_train": int(len(y)), "n_test": int(len(ty)),
+                "weights_hash": weights_hash(net)}
 
     # ---- few-shot and OOD variants ----------------------------------------------------------
     def split(self) -> Split:
