@@ -4,11 +4,13 @@ Hydra's launchers already run the remaining jobs when one raises (the exception 
 job's return); this callback makes the outcome visible: each job appends a line to
 ``<sweep dir>/jobs.jsonl`` (number, overrides, status, run dir, error) as it ends, in its own
 process (so joblib and SLURM workers report too), and the end of the multirun prints a summary
-and writes ``<sweep dir>/jobs_summary.txt``.
+and writes ``<sweep dir>/jobs_summary.txt``. Hydra's sweeper re-raises a failed job's exception
+before ``on_multirun_end``, so the summary is also registered to print at interpreter exit.
 """
 
 from __future__ import annotations
 
+import atexit
 import json
 import logging
 from pathlib import Path
@@ -26,6 +28,12 @@ REPORT = "jobs.jsonl"
 
 
 class JobReport(Callback):
+    def __init__(self) -> None:
+        self._summarised = False
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        atexit.register(self._summary, Path(config.hydra.sweep.dir))
+
     def on_job_end(self, config: DictConfig, job_return: JobReturn, **kwargs: Any) -> None:
         hydra = config.hydra
         if hydra.mode != RunMode.MULTIRUN:
@@ -44,7 +52,12 @@ class JobReport(Callback):
             log.error("job %d (%s) FAILED: %s", entry["num"], " ".join(entry["overrides"]), entry["error"])
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
-        sweep = Path(config.hydra.sweep.dir)
+        self._summary(Path(config.hydra.sweep.dir))
+
+    def _summary(self, sweep: Path) -> None:
+        if self._summarised:
+            return
+        self._summarised = True
         path = sweep / REPORT
         entries = [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.is_file() else []
         entries.sort(key=lambda e: e["num"])
