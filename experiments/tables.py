@@ -26,7 +26,7 @@ import numpy as np
 from handradar.atomic import atomic_write_text
 from handradar.provenance import REPO_ROOT
 from handradar.tasks.report import build_tables
-from handradar.tasks.tracking import TAG_PREFIX, Tracker
+from handradar.tasks.tracking import TAG_PREFIX, Tracker, sqlite_path
 
 DEFAULT_URI = f"sqlite:///{REPO_ROOT / 'logs' / 'mlflow' / 'mlflow.db'}"
 log = logging.getLogger(__name__)
@@ -34,6 +34,10 @@ log = logging.getLogger(__name__)
 
 def load_records(tracking_uri: str) -> list[dict]:
     """Finished handradar runs as ``{"params", "metrics", "tags", "run_id"}``, latest per job hash."""
+    db = sqlite_path(tracking_uri)
+    if db is not None and not db.is_file():  # nothing has run yet: do not create a store
+        log.warning("no MLflow store at %s", db)
+        return []
     tracker = Tracker(tracking_uri, "", retries=8)
 
     def search(client) -> list:

@@ -105,6 +105,8 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
     for rec in records:
         p, metrics = rec["params"], rec["metrics"]
         kind = p.get("split.kind", "few_shot")
+        if p.get("job") not in ("variants", "external_pretrain"):
+            continue  # not a train.py job
         if p.get("job") == "external_pretrain":
             source = p.get("pretrain.source", "external")
             for name, value in metrics.items():
@@ -118,9 +120,11 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             ood_kind = p.get("split.ood", "?")
             row, table, key = OOD_LABELS.get(ood_kind, ood_kind), ood, (list(OOD_LABELS).index(ood_kind)
                                                                         if ood_kind in OOD_LABELS else 9,)
-        else:
+        elif "split.fraction" in p:
             fixed = p.get("split.test", "remainder") == "fixed"
             row, table, key = _pct(p["split.fraction"]) + ("*" if fixed else ""), few, (fixed, float(p["split.fraction"]))
+        else:
+            continue
         for variant, label in VARIANT_COLUMNS:
             value = metrics.get(f"test/acc_{variant}")
             if value is not None:
