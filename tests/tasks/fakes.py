@@ -161,7 +161,7 @@ def fake_overrides(data: Path, tmp: Path, *, logger: str = "none", extra: tuple[
             "model.net._target_=tests.tasks.fakes.tiny_cnn", "~model.net.stem_stride",
             "synth.provider._target_=tests.tasks.fakes.fake_provider",
             "synth.external_provider._target_=tests.tasks.fakes.fake_external_provider",
-            f"logger={logger}", "trainer.max_steps=20", "cgan.max_steps=20", "print_table=false",
+            f"logger={logger}", "checkpoint_interval_s=0", "trainer.max_steps=20", "cgan.max_steps=20", "print_table=false",
             *extra]
 
 

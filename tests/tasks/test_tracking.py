@@ -29,11 +29,13 @@ def test_run_life_cycle_and_resume(tmp_path: Path):
 
     again = Tracker(uri, "exp-a")
     assert again.start(run_id=run_id) == run_id  # the re-run completes the same run
+    again.log_params({"model": {"lr": 0.001, "name": "resnet18"}, "data": "moved.h5"})  # logged again: no error
     again.log_metrics({"test/acc": 0.75})
     again.end()
     run = _client(uri).get_run(run_id)
     assert run.info.status == "FINISHED"
     assert run.data.params["model.lr"] == "0.001" and len(run.data.params["long"]) == 500
+    assert run.data.params["data"] == "moved.h5"
     assert run.data.metrics == {"a/train/loss": 1.5, "test/acc": 0.75}
     assert run.data.tags["handradar.preset"] == "x"
     assert run.info.artifact_uri.startswith((tmp_path / "artifacts").as_uri())

@@ -11,6 +11,7 @@ each epoch starts), so a job killed during epoch k repeats only epoch k and ends
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -64,15 +65,27 @@ class EpochStartCheckpoint(Callback):
     epoch and replays one extra optimizer step (Lightning issue #19403), so a resumed fit would
     not match an uninterrupted one. At the start of epoch k, epochs 0..k-1 are complete in the
     loop state, and a restore continues exactly with epoch k.
+
+    interval_s: skip epochs that start less than this long after the previous save (tiny datasets
+    have epochs of a few steps, and a ResNet checkpoint with its optimizer state is ~130 MB). When a
+    checkpoint is taken does not change the training, only how much a resume repeats.
     """
 
-    def __init__(self, dirpath: str | Path) -> None:
+    def __init__(self, dirpath: str | Path, interval_s: float = 0.0) -> None:
         self.path = Path(dirpath) / "last.ckpt"
+        self.interval_s = float(interval_s)
+        self._last = time.monotonic()
 
     def on_train_batch_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule, batch: Any, batch_idx: int) -> None:
-        if batch_idx == 0 and trainer.current_epoch > 0 and not trainer.fast_dev_run:
+        if batch_idx or trainer.current_epoch == 0 or trainer.fast_dev_run:
+            return
+        due = time.monotonic() - self._last >= self.interval_s
+        if trainer.world_size > 1:  # every rank must agree: saving is collective
+            due = bool(trainer.strategy.broadcast(due, src=0))
+        if due:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            trainer.save_checkpoint(self.path)  # collective under DDP; rank 0 writes, atomically
+            trainer.save_checkpoint(self.path)  # rank 0 writes, atomically
+            self._last = time.monotonic()
 
 
 def tensor_loader(x: np.ndarray, y: np.ndarray, *, batch_size: int, seed: int, shuffle: bool = True,
@@ -85,10 +98,12 @@ def tensor_loader(x: np.ndarray, y: np.ndarray, *, batch_size: int, seed: int, s
 
 
 def make_trainer(trainer_cfg: DictConfig | Mapping, *, ckpt_dir: Path, seed: int, logger: Any = False,
-                 callbacks: Sequence[Callback] = (), overrides: Mapping[str, Any] | None = None) -> pl.Trainer:
-    """A Trainer from the ``trainer`` config plus checkpointing into ``ckpt_dir``."""
+                 callbacks: Sequence[Callback] = (), overrides: Mapping[str, Any] | None = None,
+                 checkpoint_interval_s: float = 0.0) -> pl.Trainer:
+    """A Trainer from the ``trainer`` config plus resumable checkpointing into ``ckpt_dir``."""
     cfg = OmegaConf.merge(trainer_cfg, dict(overrides or {}))
-    return instantiate(cfg, callbacks=[*callbacks, StepSeed(seed), EpochStartCheckpoint(ckpt_dir)], logger=logger,
+    return instantiate(cfg, callbacks=[*callbacks, StepSeed(seed), EpochStartCheckpoint(ckpt_dir, checkpoint_interval_s)],
+                       logger=logger,
                        default_root_dir=str(ckpt_dir), enable_checkpointing=False)
 
 

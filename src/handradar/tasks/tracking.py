@@ -148,13 +148,21 @@ class Tracker:
 
     # -- logging ------------------------------------------------------------------------------
     def log_params(self, params: Mapping[str, Any]) -> None:
-        """Flattened (``a.b.c``) parameters; values longer than MLflow's limit are cut."""
+        """Flattened (``a.b.c``) parameters; values longer than MLflow's limit are cut.
+
+        MLflow refuses to change a logged parameter, and a resumed run logs its config again: keys
+        already present are skipped (a changed value, e.g. a moved data file, is only warned about).
+        """
         if not self.enabled:
             return
         from mlflow.entities import Param
 
         flat = {k: str(v)[:MAX_PARAM_LEN] for k, v in _flatten(params).items()}
-        items = [Param(k, v) for k, v in sorted(flat.items())]
+        existing = self._call(lambda c: c.get_run(self.run_id).data.params)
+        changed = sorted(k for k, v in flat.items() if k in existing and existing[k] != v)
+        if changed:
+            log.warning("MLflow run %s keeps its first values of %s", self.run_id, changed)
+        items = [Param(k, v) for k, v in sorted(flat.items()) if k not in existing]
         for i in range(0, len(items), 100):  # MLflow's batch limit for params
             self._call(lambda c, chunk=items[i:i + 100]: c.log_batch(self.run_id, params=chunk))
 

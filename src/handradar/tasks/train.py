@@ -55,7 +55,7 @@ log = logging.getLogger(__name__)
 
 VARIANTS = ("radar_only", "model_synth", "enhanced_synth", "cgan")
 SYNTH_MODES = {"model_synth": "model", "enhanced_synth": "enhanced"}
-HASH_IGNORED = ("paths", "logger", "resume", "state_dir", "threads")
+HASH_IGNORED = ("paths", "logger", "resume", "state_dir", "threads", "checkpoint_interval_s", "print_table")
 
 
 def job_hash(cfg: DictConfig, data_hash: str) -> str:
@@ -146,8 +146,6 @@ class Job:
             except BaseException as exc:
                 if self.rank_zero:
                     with contextlib.suppress(Exception):
-                        atomic_write_text(self.run_dir / "error.txt", f"{type(exc).__name__}: {exc}\n")
-                    with contextlib.suppress(Exception):
                         self.tracker.end("KILLED" if isinstance(exc, KeyboardInterrupt) else "FAILED")
                 raise
         return metrics
@@ -222,7 +220,8 @@ class Job:
                                num_workers=int(cfg.data.num_workers))
         ckpt_dir = self.state / name / "checkpoints"
         trainer = make_trainer(cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
-                               callbacks=self._callbacks(), overrides=overrides)
+                               callbacks=self._callbacks(), overrides=overrides,
+                               checkpoint_interval_s=float(cfg.get("checkpoint_interval_s", 0)))
         resumable_fit(trainer, module, loader, ckpt_dir)
         if cfg.model.get("precise_bn", True):
             recompute_bn_stats(module.net, x, device=self._eval_device())
@@ -299,7 +298,8 @@ class Job:
         loader = tensor_loader(x, y, batch_size=int(cfg.batch_size), seed=self.seed, drop_last=len(y) > int(cfg.batch_size))
         ckpt_dir = self.state / "cgan_generator" / "checkpoints"
         trainer = make_trainer(self.cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
-                               callbacks=self._callbacks(), overrides={"max_steps": int(cfg.max_steps), "max_epochs": -1})
+                               callbacks=self._callbacks(), overrides={"max_steps": int(cfg.max_steps), "max_epochs": -1},
+                               checkpoint_interval_s=float(self.cfg.get("checkpoint_interval_s", 0)))
         resumable_fit(trainer, module, loader, ckpt_dir)
         pool_counts = np.bincount(real.y[split.pool], minlength=n_classes)
         per_class = cfg.get("samples_per_class")
@@ -379,7 +379,13 @@ def run(cfg: DictConfig, run_dir: str | Path | None = None) -> Path:
         run_dir = HydraConfig.get().runtime.output_dir
     run_dir = Path(run_dir).resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
-    metrics = Job(cfg, run_dir).run()
+    try:
+        metrics = Job(cfg, run_dir).run()
+    except BaseException as exc:
+        if _is_rank_zero():
+            with contextlib.suppress(Exception):
+                atomic_write_text(run_dir / "error.txt", f"{type(exc).__name__}: {exc}\n")
+        raise
     if _is_rank_zero() and cfg.get("print_table", True):
         params = {k: str(v) for k, v in _flatten(OmegaConf.to_container(cfg, resolve=True)).items()}
         print(job_table(params, metrics), flush=True)
