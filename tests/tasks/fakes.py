@@ -186,3 +186,9 @@ def _one_torch_thread():
 def fake_data(tmp_path_factory) -> Path:
     """10 gestures x 8 rows with full meta (subjects, angles, hands, occlusion) and skeletons."""
     return write_fake_dataset(tmp_path_factory.mktemp("data") / "fake.h5", per_class=8)
+
+
+def custom_job(job) -> dict[str, float]:
+    """A job kind defined outside handradar.tasks.train (like a synthesis-fit job)."""
+    job.tracker.log_metrics({"custom/epoch_metric": 0.5}, step=0)
+    return {"test/ssim_model": float(job.real.x.mean()), "test/n_rows": float(len(job.real))}

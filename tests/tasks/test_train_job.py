@@ -186,3 +186,12 @@ def test_default_simulator_provider_explains_itself(fake_data: Path, tmp_path: P
     cfg = compose_train(["+experiment=few_shot_20pct", "variants=[model_synth]", "trainer.fast_dev_run=true", *overrides])
     with pytest.raises(HandradarError, match="simulator provider .* not available.*variants="):
         run(cfg, run_dir=tmp_path / "run")
+
+
+def test_custom_job_kind(fake_data: Path, tmp_path: Path):
+    cfg = compose_train(["job=tests.tasks.fakes.custom_job", *fake_overrides(fake_data, tmp_path)])
+    run_dir = run(cfg, run_dir=tmp_path / "run")
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["test/n_rows"] == 80.0 and 0 < metrics["test/ssim_model"] < 1
+    with pytest.raises(ValueError, match="job must be"):
+        run(compose_train(["job=nonsense", *fake_overrides(fake_data, tmp_path)]), run_dir=tmp_path / "run2")

@@ -13,7 +13,10 @@ Job kinds (``job``): ``variants`` trains one classifier per entry of ``variants`
 same + one synthetic spectrogram per training-pool row from ``synth.provider`` in mode
 ``model`` / ``enhanced``), ``cgan`` (the same + CGAN samples, as many per class as the pool has
 rows). ``external_pretrain`` pre-trains on ``synth.external_provider`` data and fine-tunes on
-few-shot fractions of class subsets, against the same training from scratch.
+few-shot fractions of class subsets, against the same training from scratch. Any other job kind is
+a dotted function name ``fn(job: Job) -> {metric name: number}`` (e.g. a synthesis-fit job): it gets
+the loaded real data (``job.real``), the state folder (``job.state``, for resumable work), the
+tracker and ``job.cfg``, and its metrics go to metrics.json and MLflow like the built-in kinds.
 
 Resuming: the job's state (checkpoints, finished variants, CGAN samples, the MLflow run id) lives
 in ``<state_dir>/<job hash>``; the hash covers the config (paths, logging and caches excluded) and
@@ -41,7 +44,7 @@ from lightning.fabric.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_path, atomic_write_text
-from handradar.data.provision import ArrayDataset, file_hash, load_arrays
+from handradar.data.provision import ArrayDataset, file_hash, import_callable, load_arrays
 from handradar.data.splits import Split, few_shot_split, make_split
 from handradar.provenance import code_version, config_hash
 from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
@@ -133,13 +136,17 @@ class Job:
                 self.tracker.log_params(resolved)
                 self.tracker.log_dict(resolved, "config.yaml")
             try:
+                results: dict[str, dict] = {}
                 if cfg.job == "variants":
                     results = self.run_variants()
                 elif cfg.job == "external_pretrain":
                     results = self.run_external_pretrain()
+                elif "." in str(cfg.job):  # another job kind: a function (job: Job) -> {metric: number}
+                    metrics = {k: float(v) for k, v in import_callable(str(cfg.job))(self).items()}
                 else:
-                    raise ValueError(f"job must be 'variants' or 'external_pretrain', found {cfg.job!r}")
-                metrics = {f"test/acc_{name}": r["acc"] for name, r in results.items()}
+                    raise ValueError(f"job must be 'variants', 'external_pretrain' or a dotted function name, found {cfg.job!r}")
+                if results:
+                    metrics = {f"test/acc_{name}": r["acc"] for name, r in results.items()}
                 if self.rank_zero:
                     self._write_outputs(results, metrics)
                     self.tracker.end("FINISHED")
