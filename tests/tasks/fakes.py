@@ -176,10 +176,14 @@ def compose_train(overrides: list[str]):
 
 
 # ---- fixtures (imported by the conftest.py of tests/{config,experiments,models,tasks}) ----------
-@pytest.fixture(autouse=True, scope="session")
+@pytest.fixture(autouse=True, scope="module")
 def _one_torch_thread():
-    """One torch thread: the test machine is shared, and oversubscribed OpenMP threads run ~10x slower."""
+    """One torch thread in the modules that use this fixture (restored after): the test machine is
+    shared, and oversubscribed OpenMP threads run ~10x slower."""
+    before = torch.get_num_threads()
     torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
 
 
 @pytest.fixture(scope="session")
