@@ -131,3 +131,8 @@ def test_experiment_from_any_working_directory(tmp_path: Path):
     assert out.returncode == 0, out.stderr
     cfg = OmegaConf.create(out.stdout)
     assert cfg.task_name == "ood_subject" and cfg.split.ood == "subject"
+
+
+def test_logger_none_is_a_disabled_tracker():
+    tracker = instantiate(compose_train(["logger=none"]).logger)
+    assert isinstance(tracker, Tracker) and not tracker.enabled and tracker.start() is None
