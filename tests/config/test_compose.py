@@ -13,10 +13,11 @@ from hydra.utils import get_class, instantiate
 from omegaconf import OmegaConf
 
 from handradar.config import config_dir, experiments_dir
-from handradar.data.provision import HDF5Source, RecordingsSource, WorldSource
+from handradar.data.provision import HDF5Source, RecordingsSource, WorldSource, import_callable
 from handradar.models.cgan import Discriminator, Generator
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
+from handradar.sim.simulator import Simulator
 from handradar.tasks.tracking import Tracker
 from tests.tasks.fakes import compose_train
 
@@ -48,9 +49,15 @@ def test_preset_composes_and_instantiates(preset: str, tmp_path: Path):
     assert isinstance(instantiate(cfg.data.source), WorldSource)  # the default data: the reference world
     assert isinstance(instantiate(cfg.radar), RadarConfig) and isinstance(instantiate(cfg.chain), ChainConfig)
     assert callable(instantiate(cfg.synth.provider)) and callable(instantiate(cfg.synth.external_provider))
+    sim = instantiate(cfg.sim)(radar=instantiate(cfg.radar), chain=instantiate(cfg.chain))
+    assert isinstance(sim, Simulator) and not list(sim.effects)  # the paper's model by default
     if cfg.job == "variants":
         assert list(cfg.variants) == METRICS["few_shot"]
         assert cfg.split.kind in ("few_shot", "ood")
+    elif preset == "synth_fit":
+        assert callable(import_callable(cfg.job))
+        assert [dict(p) for p in cfg.synth_fit.phases] == [{"epochs": 20, "lr": 5e-4, "batch_size": 32},
+                                                          {"epochs": 50, "lr": 1e-4, "batch_size": 16}]
     else:
         assert cfg.job == "external_pretrain"
         assert cfg.data.dhg.root is None and Path(cfg.data.sfinge3d.root).name == "sfinge3d"

@@ -165,29 +165,6 @@ def test_provider_breaking_the_contract_fails_clearly(fake_data: Path, tmp_path:
     assert not (tmp_path / "run" / "metrics.json").exists()
 
 
-def test_default_world_source_explains_itself(tmp_path: Path):
-    try:
-        from handradar.world import build_world_dataset  # noqa: F401
-        pytest.skip("the reference-world generator is part of this build")
-    except ImportError:
-        pass
-    cfg = compose_train(["+experiment=few_shot_5pct", f"paths.log_dir={tmp_path}", f"paths.cache_dir={tmp_path}"])
-    with pytest.raises(HandradarError, match="reference-world generator .* not available.*data=hdf5"):
-        Job(cfg, tmp_path).run()
-
-
-def test_default_simulator_provider_explains_itself(fake_data: Path, tmp_path: Path):
-    try:
-        from handradar.sim.provider import synthesize_rows  # noqa: F401
-        pytest.skip("the simulator provider is part of this build")
-    except ImportError:
-        pass
-    overrides = [o for o in fake_overrides(fake_data, tmp_path) if not o.startswith("synth.provider")]
-    cfg = compose_train(["+experiment=few_shot_20pct", "variants=[model_synth]", "trainer.fast_dev_run=true", *overrides])
-    with pytest.raises(HandradarError, match="simulator provider .* not available.*variants="):
-        run(cfg, run_dir=tmp_path / "run")
-
-
 def test_custom_job_kind(fake_data: Path, tmp_path: Path):
     cfg = compose_train(["job=tests.tasks.fakes.custom_job", *fake_overrides(fake_data, tmp_path)])
     run_dir = run(cfg, run_dir=tmp_path / "run")

@@ -16,7 +16,7 @@ seed: int, cache_dir: Path) -> Path``
     ``data.sfinge3d`` or ``data.dhg`` node: ``name``, ``root``, ...), as a ``handradar.dataset/1``
     file with the source's own labels and the class names in the attribute ``classes``.
 
-The defaults below import the simulator lazily and say clearly when it is not part of the build.
+The defaults are handradar.tasks.synthetic.synthesize_rows and synthesize_external (conf/train.yaml).
 :func:`load_synthetic` checks what a provider returned.
 """
 
@@ -27,34 +27,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from handradar.data.provision import ArrayDataset, import_callable, load_arrays
-from handradar.errors import FormatError, HandradarError
-
-SIM_PROVIDER = "handradar.sim.provider.synthesize_rows"
-SIM_EXTERNAL_PROVIDER = "handradar.sim.provider.synthesize_external"
-
-
-def _import(name: str, what: str):
-    try:
-        return import_callable(name)
-    except ImportError as exc:
-        raise HandradarError(f"{what} '{name}' is not available in this build ({exc}); set synth.provider / "
-                             "synth.external_provider to a callable with the contract of handradar.tasks.providers, "
-                             "or drop the synthetic variants (variants=[radar_only,cgan])") from None
-
-
-def simulator_provider(real_path: Path, rows: np.ndarray, mode: Literal["model", "enhanced"], *, fit_rows: np.ndarray,
-                       seed: int, cache_dir: Path) -> Path:
-    """Default ``synth.provider``: the skeleton simulator (+ RadarWeightNet for mode="enhanced")."""
-    fn = _import(SIM_PROVIDER, "the simulator provider")
-    return fn(real_path, rows, mode, fit_rows=fit_rows, seed=seed, cache_dir=cache_dir)
-
-
-def simulator_external_provider(source_cfg: Any, *, seed: int, cache_dir: Path) -> Path:
-    """Default ``synth.external_provider``: external skeletons through the simulator."""
-    fn = _import(SIM_EXTERNAL_PROVIDER, "the external-skeleton provider")
-    return fn(source_cfg, seed=seed, cache_dir=cache_dir)
-
+from handradar.data.provision import ArrayDataset, load_arrays
+from handradar.errors import FormatError
 
 def load_synthetic(path: str | Path, expected_labels: np.ndarray, shape: tuple[int, int] = (64, 32)) -> ArrayDataset:
     """A provider's output, checked against the rows it was asked for (count, labels in order, shape)."""

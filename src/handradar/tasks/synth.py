@@ -55,8 +55,7 @@ class Pairs:
     rows: np.ndarray  # (N,) row indices into the dataset file
     features: torch.Tensor  # (N, T, 2, 19, 5) float32
     masks: torch.Tensor  # (N, T, 2) bool
-    packed: torch.Tensor  # (N, 39, F, L, Ch, bins, 2) float16 (handradar.sim.cache.pack)
-    scale: torch.Tensor  # (N,) float32
+    profiles: torch.Tensor  # (N, 39, F, L, Ch, bins) complex64 slot profiles (5 MB a row by default)
     active: torch.Tensor  # (N, 38) bool: bone slots that reflect anything
     targets: torch.Tensor  # (N, 64, 32) float32 measured spectrograms in [0, 1]
 
@@ -65,24 +64,29 @@ class Pairs:
 
     def subset(self, idx: np.ndarray | torch.Tensor) -> Pairs:
         i = torch.as_tensor(np.asarray(idx), dtype=torch.long)
-        return Pairs(self.rows[i.numpy()], self.features[i], self.masks[i], self.packed[i], self.scale[i],
-                     self.active[i], self.targets[i])
+        return Pairs(self.rows[i.numpy()], self.features[i], self.masks[i], self.profiles[i], self.active[i],
+                     self.targets[i])
 
 
-def load_pairs(caches: DatasetCaches, targets: np.ndarray, rows: np.ndarray) -> Pairs:
-    """Gather ``rows`` of the cached features/profiles and their measured spectrograms."""
+def load_pairs(caches: DatasetCaches, targets: np.ndarray | None, rows: np.ndarray, *, features: bool = True) -> Pairs:
+    """Gather ``rows`` of the cached features/profiles and their measured spectrograms.
+
+    Profiles are unpacked to complex64 once here (twice the cache's float16 size in memory): a
+    training step then spends no time converting them. ``targets`` None (nothing measured) and
+    ``features`` False (modelling only) leave those fields empty.
+    """
     rows = np.asarray(rows, dtype=np.int64)
     packed, scale, active = caches.profiles.load(rows)
-    return Pairs(rows=rows, features=torch.as_tensor(caches.features.features[rows], dtype=torch.float32),
-                 masks=torch.as_tensor(caches.masks[rows], dtype=torch.bool), packed=packed, scale=scale,
-                 active=torch.as_tensor(active, dtype=torch.bool),
-                 targets=torch.as_tensor(np.asarray(targets)[rows], dtype=torch.float32))
+    feats = (torch.as_tensor(caches.features.features[rows], dtype=torch.float32) if features
+             else torch.zeros(len(rows), 0))
+    tgt = torch.zeros(len(rows), 0) if targets is None else torch.as_tensor(np.asarray(targets)[rows], dtype=torch.float32)
+    return Pairs(rows=rows, features=feats, masks=torch.as_tensor(caches.masks[rows], dtype=torch.bool),
+                 profiles=unpack(packed, scale), active=torch.as_tensor(active, dtype=torch.bool), targets=tgt)
 
 
 def _spectrograms(sim: Simulator, net: RadarWeightNet | None, p: Pairs) -> torch.Tensor:
-    profiles = unpack(p.packed, p.scale)
     weights = None if net is None else net(p.features, p.masks)
-    return sim.spectrogram(sim.combine(profiles, weights, active=p.active.any(0)))
+    return sim.spectrogram(sim.combine(p.profiles, weights, active=p.active.any(0)))
 
 
 @torch.no_grad()

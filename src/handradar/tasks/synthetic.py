@@ -1,0 +1,323 @@
+"""Synthetic spectrograms from skeletons: the providers of train.py and ``handradar-synth``.
+
+Two paths, one simulator:
+
+- rows of a radar dataset (:func:`synthesize_rows`, the ``synth.provider`` of train.py): each
+  requested row's skeleton window is simulated with the modelling-only simulator (mode "model")
+  or with simulator + RadarWeightNet fitted on the radar data of ``fit_rows`` (mode "enhanced");
+- sequences of any skeleton source (:func:`synthesize_source`, used by ``handradar-synth`` and the
+  ``synth.external_provider``): each sequence is resampled to the simulator's skeleton rate, the
+  spectrogram-long window with the most joint motion is simulated (the gesture), optionally
+  weighted by a RadarWeightNet checkpoint.
+
+Outputs are ``handradar.dataset/1`` files, cached under ``cache_dir`` by a hash of everything that
+determines them and written atomically. RadarWeightNet checkpoints (:func:`save_weight_net`) hold
+the network's settings and weights and the hand model and skeleton rate they were trained with.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any, Literal
+
+import h5py
+import lightning.pytorch as pl
+import numpy as np
+import torch
+from omegaconf import DictConfig, OmegaConf
+
+from handradar.atomic import atomic_path
+from handradar.data.hdf5 import open_writer, read_attrs, read_meta_group
+from handradar.errors import FormatError
+from handradar.hand.features import HandModelConfig, cached_bone_features
+from handradar.hand.skeleton import HandSequence
+from handradar.models.radar_weight_net import RadarWeightNet
+from handradar.provenance import config_hash
+from handradar.radar.chain import ChainConfig
+from handradar.radar.config import RadarConfig
+from handradar.sim.cache import DatasetCaches, SlotProfileCache, cache_slot_profiles
+from handradar.sim.simulator import Simulator
+from handradar.tasks.synth import PAPER_SCHEDULE, Pairs, Phase, SynthFitModule, load_pairs, predict
+
+log = logging.getLogger(__name__)
+
+WEIGHTS_FORMAT = "handradar.radarweightnet/1"
+SimFactory = Callable[..., Simulator]
+
+
+def make_simulator(sim: SimFactory | Simulator | DictConfig | None, radar: RadarConfig, chain: ChainConfig,
+                   skeleton_rate_hz: float | None = None) -> Simulator:
+    """A Simulator for ``radar``/``chain``: from a partial (``instantiate(cfg.sim)``), a config node,
+    an instance (checked to match) or None (the paper's model)."""
+    if isinstance(sim, Simulator):
+        if sim.radar != radar or sim.chain != chain:
+            raise ValueError("the simulator's radar/chain differ from the data's")
+        return sim
+    if isinstance(sim, DictConfig):
+        from hydra.utils import instantiate
+
+        sim = instantiate(sim)
+    kw = {} if skeleton_rate_hz is None else {"skeleton_rate_hz": float(skeleton_rate_hz)}
+    return (sim or Simulator)(radar=radar, chain=chain, **kw)
+
+
+def _phases(phases: Sequence[Phase | dict] | None) -> tuple[Phase, ...]:
+    if phases is None:
+        return PAPER_SCHEDULE
+    out = []
+    for p in phases:
+        if isinstance(p, Phase):
+            out.append(p)
+        else:
+            d = OmegaConf.to_container(p) if isinstance(p, DictConfig) else dict(p)
+            out.append(Phase(int(d["epochs"]), float(d["lr"]), int(d["batch_size"])))
+    return tuple(out)
+
+
+# ---- caches of dataset rows --------------------------------------------------------------------------
+def dataset_simulator(dataset: str | Path, sim: SimFactory | Simulator | DictConfig | None) -> Simulator:
+    """The simulator of a dataset file's radar, chain and skeleton rate."""
+    attrs = read_attrs(dataset)
+    if attrs.get("radar") is None or attrs.get("chain") is None:
+        raise FormatError(dataset, "needs the attributes radar_cfg and chain to simulate its rows")
+    return make_simulator(sim, attrs["radar"], attrs["chain"], attrs.get("skeleton_rate_hz"))
+
+
+def cache_rows(dataset: str | Path, rows: np.ndarray, sim: Simulator, cache_dir: str | Path, *,
+               features: bool = True, n_jobs: int = 2, progress: bool = False) -> DatasetCaches:
+    """Features and slot profiles of ``rows`` of a dataset (cached; indexed 0..len(rows)-1).
+
+    Only the requested rows are simulated: a few-shot job needs a few dozen, not the whole file.
+    Without ``features`` (modelling only, no occlusion effect) no visibility is ray cast.
+    """
+    rows = np.asarray(rows, dtype=np.int64)
+    with h5py.File(dataset, "r") as h5:
+        order = np.argsort(rows)
+        skel = np.empty((len(rows), *h5["skeletons"].shape[1:]), np.float32)
+        mask = np.empty((len(rows), *h5["hand_mask"].shape[1:]), bool)
+        skel[order] = h5["skeletons"][rows[order]]
+        mask[order] = h5["hand_mask"][rows[order]]
+    times = np.arange(skel.shape[1]) / sim.skeleton_rate_hz
+    needs_vis = any(e.name == "occlusion" for e in sim.effects)
+    feats = None
+    if features or needs_vis:
+        feats = cached_bone_features(skel, times, mask, sim.radar.wavelength_m, sim.hand, cache_dir,
+                                     progress=progress, n_jobs=n_jobs)
+    path = cache_slot_profiles(sim, skel, mask, cache_dir, times=times,
+                               visibility=feats.visible_fraction() if needs_vis else None, progress=progress)
+    return DatasetCaches(feats, mask, times, SlotProfileCache(path))
+
+
+def spectrograms_of(dataset: str | Path, rows: np.ndarray) -> np.ndarray:
+    with h5py.File(dataset, "r") as h5:
+        return np.stack([h5["spectrograms"][int(r)] for r in rows]) if len(rows) else np.zeros((0, 64, 32), np.float32)
+
+
+# ---- RadarWeightNet ------------------------------------------------------------------------------------
+def fit_weight_net(sim: Simulator, train: Pairs, *, phases: Sequence[Phase] = PAPER_SCHEDULE, seed: int = 0,
+                   trainer_kwargs: dict | None = None, ckpt_dir: str | Path | None = None,
+                   net_kwargs: dict | None = None, callbacks: Sequence[pl.Callback] = (),
+                   logger: Any = False) -> RadarWeightNet:
+    """Train a fresh RadarWeightNet on ``train`` with the SSIM loss (resumable with ``ckpt_dir``)."""
+    from handradar.tasks.fitting import EpochStartCheckpoint, StepSeed
+
+    pl.seed_everything(seed, verbose=False)
+    net = RadarWeightNet(**(net_kwargs or {}))
+    module = SynthFitModule(sim, net, train, phases, seed=seed)
+    cbs = [*callbacks, StepSeed(seed)]
+    if ckpt_dir is not None:
+        cbs.append(EpochStartCheckpoint(ckpt_dir))
+    kw = {"accelerator": "cpu", "devices": 1, "deterministic": True, "enable_progress_bar": False,
+          "enable_model_summary": False, "num_sanity_val_steps": 0, "log_every_n_steps": 1, **(trainer_kwargs or {})}
+    trainer = pl.Trainer(max_epochs=module.total_epochs, reload_dataloaders_every_n_epochs=1, logger=logger,
+                         enable_checkpointing=False, callbacks=cbs,
+                         default_root_dir=str(ckpt_dir) if ckpt_dir else None, **kw)
+    last = Path(ckpt_dir) / "last.ckpt" if ckpt_dir is not None else None
+    trainer.fit(module, ckpt_path=str(last) if last is not None and last.is_file() else None)
+    return net.eval()
+
+
+def save_weight_net(path: str | Path, net: RadarWeightNet, sim: Simulator, net_kwargs: dict | None = None) -> Path:
+    """A RadarWeightNet checkpoint that ``synth.weights=`` / :func:`load_weight_net` read back."""
+    with atomic_path(path) as tmp:
+        torch.save({"format": WEIGHTS_FORMAT, "net_kwargs": dict(net_kwargs or {}), "state_dict": net.state_dict(),
+                    "hand": asdict(sim.hand), "skeleton_rate_hz": sim.skeleton_rate_hz}, tmp)
+    return Path(path)
+
+
+def load_weight_net(path: str | Path) -> tuple[RadarWeightNet, dict]:
+    """(network in eval mode, checkpoint info) from :func:`save_weight_net`'s file."""
+    path = Path(path)
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise FormatError(path, f"not a readable RadarWeightNet checkpoint ({exc})") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != WEIGHTS_FORMAT:
+        raise FormatError(path, f"expected a {WEIGHTS_FORMAT} checkpoint (written by synth_fit), "
+                                f"found {ckpt.get('format') if isinstance(ckpt, dict) else type(ckpt).__name__}")
+    net = RadarWeightNet(**ckpt["net_kwargs"])
+    net.load_state_dict(ckpt["state_dict"])
+    return net.eval(), ckpt
+
+
+# ---- writing synthetic datasets ------------------------------------------------------------------------
+def _write_rows_like(out: Path, real_path: Path, rows: np.ndarray, spectrograms: np.ndarray, h: str,
+                     sim: Simulator, mode: str) -> Path:
+    """A dataset with the labels, skeletons and meta of ``rows`` of ``real_path`` and new spectrograms."""
+    attrs = read_attrs(real_path)
+    meta = read_meta_group(real_path)
+    with h5py.File(real_path, "r") as h5:
+        labels, skel, mask = h5["labels"][()], h5["skeletons"], h5["hand_mask"]
+        with open_writer(out, classes=attrs["classes"], radar=attrs["radar"], chain=attrs["chain"],
+                         skeleton_rate_hz=float(attrs["skeleton_rate_hz"]), n_steps=skel.shape[1], config_hash=h,
+                         extra_attrs={"source": f"handradar.synth:{mode}", "synthetic_of": str(real_path)}) as w:
+            for i, r in enumerate(rows):
+                r = int(r)
+                w.append(spectrograms[i], int(labels[r]), skel[r], mask[r], float(h5["window_start_s"][r]),
+                         {k: (v[r].item() if hasattr(v[r], "item") else v[r]) for k, v in meta.items()})
+    return out
+
+
+def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["model", "enhanced"], *,
+                    fit_rows: np.ndarray, seed: int, cache_dir: str | Path, sim: Any = None,
+                    phases: Sequence[Phase | dict] | None = None, net_kwargs: dict | None = None,
+                    n_jobs: int = 2) -> Path:
+    """``synth.provider`` (contract in handradar.tasks.providers): one synthetic row per requested row.
+
+    mode "enhanced" fits RadarWeightNet on the radar data of ``fit_rows`` only (never test rows).
+    """
+    real_path = Path(real_path)
+    rows = np.asarray(rows, dtype=np.int64)
+    fit_rows = np.asarray(fit_rows, dtype=np.int64)
+    if mode not in ("model", "enhanced"):
+        raise ValueError(f"mode must be 'model' or 'enhanced', found {mode!r}")
+    simulator = dataset_simulator(real_path, sim)
+    phases = _phases(phases)
+    from handradar.data.provision import file_hash
+
+    key = config_hash(file_hash(real_path), rows.tolist(), mode, fit_rows.tolist() if mode == "enhanced" else None,
+                      seed, _sim_key(simulator), [asdict(p) for p in phases] if mode == "enhanced" else None,
+                      net_kwargs or {})
+    out = Path(cache_dir) / f"synthetic-{mode}-{key}.h5"
+    if out.is_file():
+        return out
+    cache_dir = Path(cache_dir)
+    if mode == "model":
+        caches = cache_rows(real_path, rows, simulator, cache_dir, features=False, n_jobs=n_jobs)
+        pairs = load_pairs(caches, None, np.arange(len(rows)), features=False)
+        spec = predict(simulator, None, pairs).numpy()
+    else:
+        both = np.union1d(rows, fit_rows)
+        caches = cache_rows(real_path, both, simulator, cache_dir, features=True, n_jobs=n_jobs)
+        targets = spectrograms_of(real_path, both)
+        local = {int(r): i for i, r in enumerate(both)}
+        train = load_pairs(caches, targets, np.asarray([local[int(r)] for r in fit_rows]))
+        net = fit_weight_net(simulator, train, phases=phases, seed=seed, net_kwargs=net_kwargs)
+        del train
+        spec = predict(simulator, net, load_pairs(caches, targets, np.asarray([local[int(r)] for r in rows]))).numpy()
+    return _write_rows_like(out, real_path, rows, spec.astype(np.float32), key, simulator, mode)
+
+
+def _sim_key(sim: Simulator) -> dict:
+    return {"radar": sim.radar, "chain": sim.chain, "hand": asdict(sim.hand), "rate": sim.skeleton_rate_hz,
+            "effects": {e.name: e.values() for e in sim.effects}, "power": (sim.tx_power_w, sim.gain_tx_dbi, sim.gain_rx_dbi)}
+
+
+# ---- skeleton sources ----------------------------------------------------------------------------------
+def motion_window(seq: HandSequence, n_steps: int, rate_hz: float) -> HandSequence:
+    """The ``n_steps``-long window (at ``rate_hz``) of the sequence with the most joint motion.
+
+    Sequences shorter than the window are centred in it, holding their first and last pose (a still
+    hand adds nothing after clutter removal). Times of the result run from 0.
+    """
+    dt = 1.0 / rate_hz
+    t0, t1 = float(seq.times[0]), float(seq.times[-1])
+    n_own = int(np.floor((t1 - t0) / dt)) + 1
+    if n_own <= n_steps:
+        start = t0 - 0.5 * (n_steps - n_own) * dt
+    else:
+        grid = seq.resample(t0 + np.arange(n_own) * dt)
+        speed = np.zeros(n_own)
+        moving = np.linalg.norm(np.diff(grid.positions, axis=0), axis=-1).sum(axis=(-2, -1))
+        speed[1:] = moving
+        sums = np.convolve(speed, np.ones(n_steps), mode="valid")
+        start = t0 + int(np.argmax(sums)) * dt
+    window = seq.resample(start + np.arange(n_steps) * dt)
+    window.times = np.arange(n_steps) * dt
+    return window
+
+
+def source_options(source_cfg: Any) -> tuple[str, str, dict]:
+    """(name, root, options) of a ``source`` config node (name, root, and the source's options)."""
+    d = OmegaConf.to_container(source_cfg, resolve=True) if isinstance(source_cfg, DictConfig) else dict(source_cfg)
+    name, root = d.pop("name", None), d.pop("root", None)
+    if not name or not root:
+        raise ValueError(f"a skeleton source needs 'name' and 'root', found {sorted(d) + ['name', 'root']}")
+    return str(name), str(root), {k: v for k, v in d.items() if v is not None}
+
+
+def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, chain: ChainConfig, sim: Any = None,
+                      weights: str | Path | None = None, skeleton_rate_hz: float = 100.0, n_jobs: int = 2,
+                      cache_dir: str | Path | None = None, progress: bool = True,
+                      skipped: list | None = None) -> Path:
+    """Skeletons of any source -> synthetic spectrograms in the dataset schema at ``out``.
+
+    Labels are the source's own class indices (class names in the attribute ``classes``).
+    weights: a RadarWeightNet checkpoint (:func:`save_weight_net`); None: modelling only.
+    skipped: a list receiving (item, reason) for unreadable items (default: raise).
+    """
+    from handradar.hand.sources import iter_source, source_classes
+
+    name, root, options = source_options(source_cfg)
+    net, info = (None, {}) if weights is None else load_weight_net(weights)
+    if info:
+        skeleton_rate_hz = float(info["skeleton_rate_hz"])
+        sim_hand = HandModelConfig(**info["hand"])
+    simulator = make_simulator(sim, radar, chain, skeleton_rate_hz)
+    if info and simulator.hand != sim_hand:
+        raise FormatError(weights, f"checkpoint trained with hand model {sim_hand}, simulator uses {simulator.hand}")
+    n_steps = int(round(chain.frames_per_window(radar) * radar.frame_period_s * skeleton_rate_hz))
+    items = list(iter_source(name, root, errors=skipped, **options))
+    if not items:
+        raise FormatError(root, f"no {name} sequences found")
+    windows = [motion_window(it.sequence, n_steps, skeleton_rate_hz) for it in items]
+    skel = np.stack([w.positions for w in windows])
+    mask = np.stack([w.mask for w in windows])
+    times = windows[0].times
+    cache_dir = Path(cache_dir) if cache_dir is not None else Path(out).parent / ".handradar-cache"
+    needs_vis = net is not None or any(e.name == "occlusion" for e in simulator.effects)
+    feats = (cached_bone_features(skel, times, mask, radar.wavelength_m, simulator.hand, cache_dir,
+                                  progress=progress, n_jobs=n_jobs) if needs_vis else None)
+    path = cache_slot_profiles(simulator, skel, mask, cache_dir, times=times, progress=progress,
+                               visibility=feats.visible_fraction() if feats is not None and any(
+                                   e.name == "occlusion" for e in simulator.effects) else None)
+    caches = DatasetCaches(feats, mask, times, SlotProfileCache(path))
+    pairs = load_pairs(caches, None, np.arange(len(items)), features=net is not None)
+    spec = predict(simulator, net, pairs).numpy().astype(np.float32)
+    classes = source_classes(name, **{k: v for k, v in options.items() if k == "n_classes"})
+    h = config_hash(name, root, options, _sim_key(simulator), str(weights), "handradar-synth")
+    meta_keys = sorted(set().union(*(it.meta.keys() for it in items)))
+    with open_writer(out, classes=classes, radar=radar, chain=chain, skeleton_rate_hz=skeleton_rate_hz,
+                     n_steps=n_steps, config_hash=h,
+                     extra_attrs={"source": f"handradar.synth:{name}", "weights": str(weights or "")}) as w:
+        for i, (it, win) in enumerate(zip(items, windows)):
+            meta = {k: it.meta.get(k, "") for k in meta_keys}
+            meta["recording"] = it.name
+            w.append(spec[i], it.label, win.positions, win.mask, 0.0, meta)
+    return Path(out)
+
+
+def synthesize_external(source_cfg: Any, *, seed: int, cache_dir: str | Path, radar: RadarConfig,
+                        chain: ChainConfig, sim: Any = None, weights: str | Path | None = None) -> Path:
+    """``synth.external_provider`` (contract in handradar.tasks.providers): a cached handradar-synth run."""
+    name, root, options = source_options(source_cfg)
+    simulator = make_simulator(sim, radar, chain)
+    key = config_hash(name, str(Path(root).resolve()), options, _sim_key(simulator), str(weights), "external")
+    out = Path(cache_dir) / f"external-{name}-{key}.h5"
+    if not out.is_file():
+        synthesize_source(source_cfg, out, radar=radar, chain=chain, sim=simulator, weights=weights,
+                          cache_dir=cache_dir, progress=False)
+    return out
