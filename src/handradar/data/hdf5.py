@@ -103,6 +103,15 @@ def open_writer(path: str | Path, *, classes: Sequence[str], radar: RadarConfig,
             writer.finish()
 
 
+def read_rows(ds: h5py.Dataset, rows: np.ndarray) -> np.ndarray:
+    """``ds[rows]`` for increasing ``rows``, read as contiguous runs: h5py's point selection
+    (``ds[list]``) is ~15x slower on row-chunked compressed data."""
+    if not len(rows):
+        return np.empty((0, *ds.shape[1:]), ds.dtype)
+    breaks = np.flatnonzero(np.diff(rows) != 1) + 1
+    return np.concatenate([ds[int(run[0]):int(run[-1]) + 1] for run in np.split(rows, breaks)])
+
+
 def read_attrs(path: str | Path) -> dict[str, object]:
     """Validated file attributes, with ``classes``/``chain`` decoded and ``radar`` parsed."""
     path = Path(path)

@@ -37,7 +37,7 @@ import numpy as np
 import torch
 
 from handradar.atomic import atomic_path
-from handradar.data.hdf5 import read_attrs
+from handradar.data.hdf5 import read_attrs, read_rows
 from handradar.errors import FormatError
 from handradar.hand.features import BoneFeatures, _digest, cached_bone_features
 from handradar.provenance import config_hash
@@ -133,10 +133,10 @@ class SlotProfileCache:
         rows = np.atleast_1d(np.asarray(rows, dtype=np.int64))
         if rows.size and (rows.min() < 0 or rows.max() >= self.n):
             raise IndexError(f"{self.path}: rows must be in [0, {self.n}), found {rows.min()}..{rows.max()}")
-        uniq, inv = np.unique(rows, return_inverse=True)  # h5py fancy indexing wants increasing rows
+        uniq, inv = np.unique(rows, return_inverse=True)
         h5 = self._file()
-        return (torch.from_numpy(h5["profiles"][uniq][inv]), torch.from_numpy(h5["scale"][uniq][inv]),
-                torch.from_numpy(h5["active"][uniq][inv]))
+        return (torch.from_numpy(read_rows(h5["profiles"], uniq)[inv]), torch.from_numpy(h5["scale"][()][uniq][inv]),
+                torch.from_numpy(h5["active"][()][uniq][inv]))
 
     def profiles(self, rows) -> torch.Tensor:
         packed, scale, _ = self.load(rows)

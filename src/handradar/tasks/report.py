@@ -1,5 +1,7 @@
 """Result tables in the paper's layout, from job records (MLflow runs or one finished job).
 
+- Table I (synthesis): one row per evaluation (held-out rows and the four generalisation
+  shifts), columns SSIM and MSE of the modelling-only and the RadarWeightNet-enhanced simulator.
 - Table II (few-shot): one row per real-data fraction and test protocol (``*``: the fixed test split
   of the complete dataset), one column per variant (radar only, + model-based synthetic,
   + RadarWeightNet-enhanced synthetic, + CGAN).
@@ -32,6 +34,11 @@ OOD_LABELS = {
     "hands": "hands (single → double)",
     "occlusion": "occlusion (without → with)",
 }
+SYNTH_ROWS = (("", "held-out"), ("_hands", "single → double hands"), ("_occlusion", "non-occluded → occluded"),
+              ("_angle", "0° → ±30°"), ("_subject", "unseen subjects"))
+SYNTH_COLUMNS = (("ssim_model", "SSIM modelling"), ("ssim_enhanced", "SSIM + RadarWeightNet"),
+                 ("mse_model", "MSE modelling"), ("mse_enhanced", "MSE + RadarWeightNet"))
+SYNTH_JOB = "handradar.tasks.synth_fit.run_synth_fit"
 PRETRAIN_METRIC = re.compile(r"^test/acc_(scratch|pretrained)_(\d+)c_(\d+)pct$")
 
 
@@ -94,8 +101,10 @@ def _pct(fraction: str | float) -> str:
 
 
 def build_tables(records: Iterable[Mapping]) -> list[Table]:
-    """Tables II, III and IV from job records; a table without records is left out."""
+    """Tables I-IV from job records; a table without records is left out."""
     variant_cols = [label for _, label in VARIANT_COLUMNS]
+    synth = Table("table1_synthesis", "Table I: simulated vs measured spectrograms (modelling only vs + RadarWeightNet)",
+                  [label for _, label in SYNTH_COLUMNS])
     few = Table("table2_few_shot", "Table II: few-shot accuracy (* = fixed test split of the complete dataset)",
                 variant_cols)
     pre = Table("table3_pretrain", "Table III: accuracy with and without pre-training on external synthetic data",
@@ -104,6 +113,13 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
     for rec in records:
         p, metrics = rec["params"], rec["metrics"]
         kind = p.get("split.kind", "few_shot")
+        if p.get("job") == SYNTH_JOB:
+            for i, (suffix, row) in enumerate(SYNTH_ROWS):
+                for key, label in SYNTH_COLUMNS:
+                    value = metrics.get(f"test/{key}{suffix}")
+                    if value is not None:
+                        synth.add(row, label, value, (i,))
+            continue
         if p.get("job") not in ("variants", "external_pretrain"):
             continue  # not a train.py job
         if p.get("job") == "external_pretrain":
@@ -128,7 +144,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             value = metrics.get(f"test/acc_{variant}")
             if value is not None:
                 table.add(row, label, value, key)
-    return [t for t in (few, pre, ood) if t.rows]
+    return [t for t in (synth, few, pre, ood) if t.rows]
 
 
 def job_table(params: Mapping[str, str], metrics: Mapping[str, float]) -> str:

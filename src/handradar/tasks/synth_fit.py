@@ -34,7 +34,6 @@ from handradar.tasks.synthetic import (
     fit_weight_net,
     load_weight_net,
     save_weight_net,
-    spectrograms_of,
 )
 
 log = logging.getLogger(__name__)
@@ -82,15 +81,16 @@ def run_synth_fit(job) -> dict[str, float]:
     sim = dataset_simulator(real.path, instantiate(cfg.sim))
     splits = synth_splits(real.y, real.meta, job.seed, test_fraction=float(sc.test_fraction),
                           max_train_rows=int(sc.max_train_rows), max_test_rows=int(sc.max_test_rows))
-    rows = np.unique(np.concatenate([np.concatenate(s) for s in splits.values()]))
+    # every row is cached (not only the splits' union): the cache key is then the dataset's, shared
+    # with the gap diagnosis and later fits
+    rows = np.arange(len(real.y))
     log.info("synth_fit: caching features and slot profiles of %d rows", len(rows))
     caches = cache_rows(real.path, rows, sim, Path(cfg.synth.cache_dir), features=True,
                         n_jobs=int(sc.get("n_jobs", 2)), progress=True)
-    targets = spectrograms_of(real.path, rows)
-    local = {int(r): i for i, r in enumerate(rows)}
+    targets = real.x
 
     def pairs(sel: np.ndarray) -> Pairs:
-        return load_pairs(caches, targets, np.asarray([local[int(r)] for r in sel]))
+        return load_pairs(caches, targets, sel)
 
     phases = _phases(sc.phases)
     net_kwargs = OmegaConf.to_container(sc.net, resolve=True) if sc.get("net") else {}

@@ -30,7 +30,7 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_path
-from handradar.data.hdf5 import open_writer, read_attrs, read_meta_group
+from handradar.data.hdf5 import open_writer, read_attrs, read_meta_group, read_rows
 from handradar.errors import FormatError
 from handradar.hand.features import HandModelConfig, cached_bone_features
 from handradar.hand.skeleton import HandSequence
@@ -94,26 +94,27 @@ def cache_rows(dataset: str | Path, rows: np.ndarray, sim: Simulator, cache_dir:
     Without ``features`` (modelling only, no occlusion effect) no visibility is ray cast.
     """
     rows = np.asarray(rows, dtype=np.int64)
+    uniq, inv = np.unique(rows, return_inverse=True)
     with h5py.File(dataset, "r") as h5:
-        order = np.argsort(rows)
-        skel = np.empty((len(rows), *h5["skeletons"].shape[1:]), np.float32)
-        mask = np.empty((len(rows), *h5["hand_mask"].shape[1:]), bool)
-        skel[order] = h5["skeletons"][rows[order]]
-        mask[order] = h5["hand_mask"][rows[order]]
+        skel = read_rows(h5["skeletons"], uniq)[inv]
+        mask = read_rows(h5["hand_mask"], uniq)[inv]
     times = np.arange(skel.shape[1]) / sim.skeleton_rate_hz
     needs_vis = any(e.name == "occlusion" for e in sim.effects)
     feats = None
     if features or needs_vis:
         feats = cached_bone_features(skel, times, mask, sim.radar.wavelength_m, sim.hand, cache_dir,
                                      progress=progress, n_jobs=n_jobs)
-    path = cache_slot_profiles(sim, skel, mask, cache_dir, times=times,
-                               visibility=feats.visible_fraction() if needs_vis else None, progress=progress)
+    # times=None: the simulator's default step times, so the key matches cache_dataset's
+    path = cache_slot_profiles(sim, skel, mask, cache_dir, visibility=feats.visible_fraction() if needs_vis else None,
+                               progress=progress)
     return DatasetCaches(feats, mask, times, SlotProfileCache(path))
 
 
 def spectrograms_of(dataset: str | Path, rows: np.ndarray) -> np.ndarray:
+    """Measured spectrograms of ``rows`` (any order), (N, doppler, columns)."""
+    uniq, inv = np.unique(np.asarray(rows, dtype=np.int64), return_inverse=True)
     with h5py.File(dataset, "r") as h5:
-        return np.stack([h5["spectrograms"][int(r)] for r in rows]) if len(rows) else np.zeros((0, 64, 32), np.float32)
+        return read_rows(h5["spectrograms"], uniq)[inv]
 
 
 # ---- RadarWeightNet ------------------------------------------------------------------------------------
