@@ -66,7 +66,7 @@ def test_recordings_source_ingests_once_per_content(tmp_path: Path, monkeypatch)
     first = src.path()
     assert first.parent == (tmp_path / "cache").resolve() and first.name.startswith("recordings-")
     assert src.path() == first and len(calls) == 1  # cached
-    assert RecordingsSource(root, ChainConfig(dynamic_range_db=30.0), tmp_path / "cache").path() != first
+    assert RecordingsSource(root, ChainConfig(dynamic_range_db=25.0), tmp_path / "cache").path() != first
     (root / "r2" / "meta.json").write_text("changed content")
     os.utime(root / "r2" / "meta.json", ns=(1, 1))
     assert src.path() != first and len(calls) == 3  # a changed recording is ingested again
