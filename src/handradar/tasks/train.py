@@ -32,6 +32,7 @@ import hashlib
 import json
 import logging
 import shutil
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -198,7 +199,10 @@ class Job:
         if f.is_file():
             log.info("variant %s already finished (%s)", name, f)
             return json.loads(f.read_text())
+        log.info("%s: started", name)
+        t0 = time.perf_counter()
         result = compute()
+        log.info("%s: finished in %.0f s", name, time.perf_counter() - t0)
         if self.rank_zero:
             atomic_write_text(f, json.dumps(result))
             shutil.rmtree(self.state / name / "checkpoints", ignore_errors=True)  # resuming is over
