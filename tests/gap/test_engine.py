@@ -19,9 +19,9 @@ VARIANTS = [{}, {"noise": {"snr_db": 10.0}}, {"palm": {"radius_m": 0.03}},
 
 @pytest.mark.parametrize("base", [{}, {"palm": {}}])
 def test_variants_match_full_simulation(radar, short_chain, base):
-    rs, _, _ = rows(radar, short_chain, 3, seed=1)
+    rs, _, _ = rows(radar, short_chain, 2, seed=1)  # one- and two-hand rows (kept in this order)
     build = builder(radar, short_chain)
-    out = VariantEngine(build, base, rs, batch_size=3).spectrograms(VARIANTS)  # one batch: the same noise draws
+    out = VariantEngine(build, base, rs, batch_size=2).spectrograms(VARIANTS)  # one batch: the same noise draws
     for v, spec in zip(VARIANTS, out):
         sim = build(merge(base, v))
         with torch.no_grad():

@@ -19,6 +19,9 @@ computed once; then each variant takes the cheapest path that gives its signal:
   linearly and this path interpolates both linearly, a second-order difference (tests bound it).
 - anything else (skeleton-stage effects, points that move): the variant's full simulation.
 
+Reflection points with zero gain in a whole batch (an untracked hand) are skipped, and rows that
+track the same hands are batched together, so one-hand rows cost about half.
+
 Public API:
 
     RowSet(skeletons (N, T, 2, 21, 3), masks (N, T, 2), times (T,), visibility (N, T, 2, 19) | None)
@@ -140,15 +143,34 @@ def slot_weights(base: Scatterers, new: Scatterers, rtol: float = 1e-6) -> torch
     return w
 
 
-def point_profiles(sim: Simulator, scat: Scatterers, times: torch.Tensor) -> torch.Tensor:
-    """Profiles of each point on its own (B, K, F, L, Ch, bins): the slot layout holds 38 points at a time."""
+def active(scat: Scatterers) -> tuple[Scatterers, torch.Tensor]:
+    """The points with a non-zero gain somewhere in the batch (others reflect nothing) and their indices."""
+    keep = torch.nonzero((scat.gain != 0).flatten(0, 1).any(0)).flatten()
+    if keep.numel() == scat.n_points:
+        return scat, keep
+    return Scatterers(scat.tx[:, :, keep], scat.rx[:, :, keep], scat.rcs_m2[:, :, keep], scat.gain[:, :, keep],
+                      scat.owner[keep]), keep
+
+
+def profiles(sim: Simulator, scat: Scatterers, times: torch.Tensor) -> torch.Tensor:
+    """The simulator's slot profiles of ``scat`` (B, 39, ...), skipping points that reflect nothing in the
+    batch (an untracked hand: a batch of one-hand rows costs half). Same values as sim.profiles_of."""
+    return sim.profiles_of(active(scat)[0], times)
+
+
+def point_profiles(sim: Simulator, scat: Scatterers, times: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Profiles of each active point on its own (B, K_active, F, L, Ch, bins) and the points' indices
+    (the slot layout holds 38 points at a time)."""
+    scat, keep = active(scat)
     out = []
     for k0 in range(0, scat.n_points, N_SLOTS):
         k1 = min(scat.n_points, k0 + N_SLOTS)
         part = Scatterers(scat.tx[:, :, k0:k1], scat.rx[:, :, k0:k1], scat.rcs_m2[:, :, k0:k1],
                           scat.gain[:, :, k0:k1], torch.arange(k1 - k0, device=scat.tx.device))
         out.append(sim.profiles_of(part, times)[:, :k1 - k0])
-    return torch.cat(out, 1)
+    if not out:
+        return torch.zeros(scat.tx.shape[0], 0, 1, dtype=torch.complex64), keep
+    return torch.cat(out, 1), keep
 
 
 class _Appended:
@@ -157,18 +179,21 @@ class _Appended:
     def __init__(self) -> None:
         self.scat: Scatterers | None = None
         self.profiles: torch.Tensor | None = None
+        self.keep: torch.Tensor | None = None
 
-    def signal(self, sim: Simulator, app: Scatterers, times: torch.Tensor) -> torch.Tensor:
-        """Summed profiles (B, F, L, Ch, bins) of the appended points."""
+    def signal(self, sim: Simulator, app: Scatterers, times: torch.Tensor) -> torch.Tensor | None:
+        """Summed profiles (B, F, L, Ch, bins) of the appended points (None: they reflect nothing)."""
         old = self.scat
         if old is not None and _same(app.owner, old.owner) and _same(app.tx, old.tx) and _same(app.rx, old.rx):
             c = constant_ratio(_amplitude(app), _amplitude(old))
             if c is not None:
-                return torch.einsum("bk,bk...->b...", c.to(self.profiles.real.dtype).to(self.profiles.dtype),
-                                    self.profiles)
-        self.profiles = point_profiles(sim, app, times)
+                if self.profiles.shape[1] == 0:
+                    return None
+                c = c[:, self.keep].to(self.profiles.real.dtype).to(self.profiles.dtype)
+                return torch.einsum("bk,bk...->b...", c, self.profiles)
+        self.profiles, self.keep = point_profiles(sim, app, times)
         self.scat = app
-        return self.profiles.sum(1)
+        return self.profiles.sum(1) if self.profiles.shape[1] else None
 
 
 class VariantEngine:
@@ -180,9 +205,14 @@ class VariantEngine:
         self.base_sim = build(self.base)
         self.base_profiles = base_profiles  # rows -> the base's slot profiles (e.g. from the slot-profile cache)
 
-    def _batches(self, idx: np.ndarray) -> Iterator[np.ndarray]:
+    def _batches(self, idx: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """(positions in idx, rows) per batch; rows that track the same hands share batches, so that a
+        batch of one-hand rows skips the other hand's reflection points."""
+        hands = self.rows.masks[idx].any(axis=1)  # (n, 2) hand tracked somewhere in the window
+        order = np.argsort(hands[:, 0] * 1 + hands[:, 1] * 2, kind="stable")
         for i0 in range(0, len(idx), self.batch_size):
-            yield idx[i0:i0 + self.batch_size]
+            pos = order[i0:i0 + self.batch_size]
+            yield pos, idx[pos]
 
     def _inputs(self, rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor | None]:
         r = self.rows
@@ -211,19 +241,20 @@ class VariantEngine:
                     (s0.tx, s0.rx, s0.rcs_m2, s0.gain, s0.owner))):
                 app = _suffix(s1, k0)
                 extra = store.signal(sim, app, ctx.times) if store is not None else \
-                    point_profiles(sim, app, ctx.times).sum(1)
-                return sum0 + extra.to(sum0.dtype)
+                    profiles(sim, app, ctx.times).sum(1)
+                return sum0 if extra is None else sum0 + extra.to(sum0.dtype)
             w = slot_weights(s0, s1)
             if w is not None:
                 return sim.combine(p0, w, times=t)
-            return sim.combine(sim.profiles_of(s1, ctx.times))
-        return sim.combine(sim.slot_profiles(sk, m, times=t, visibility=vis))
+            return sim.combine(profiles(sim, s1, ctx.times))
+        ctx1 = sim.context(sk, m, times=t, visibility=vis)
+        return sim.combine(profiles(sim, sim.scatterers(ctx1), ctx1.times))
 
     def _base(self, inputs, rows: np.ndarray):
         sk, m, t, vis = inputs
         ctx = self.base_sim.context(sk, m, times=t, visibility=vis)
         s0 = self.base_sim.scatterers(ctx)
-        p0 = self.base_profiles(rows) if self.base_profiles is not None else self.base_sim.profiles_of(s0, ctx.times)
+        p0 = self.base_profiles(rows) if self.base_profiles is not None else profiles(self.base_sim, s0, ctx.times)
         return ctx, s0, p0, self.base_sim.combine(p0)
 
     @torch.no_grad()
@@ -239,8 +270,7 @@ class VariantEngine:
         idx = np.arange(len(self.rows)) if idx is None else np.asarray(idx, dtype=np.int64)
         sims = [self.build(merge(self.base, v)) for v in variants]
         out: np.ndarray | None = None
-        pos = 0
-        for rows in self._batches(idx):
+        for pos, rows in self._batches(idx):
             inputs = self._inputs(rows)
             base = self._base(inputs, rows)
             if on_base is not None:
@@ -250,8 +280,7 @@ class VariantEngine:
                 spec = sim.spectrogram(self._signal(sim, v, inputs, base, store)).float().numpy()
                 if out is None:
                     out = np.zeros((len(variants), len(idx), *spec.shape[1:]), np.float32)
-                out[j, pos:pos + len(rows)] = spec
-            pos += len(rows)
+                out[j, pos] = spec
             if progress is not None:
                 progress(len(rows))
         if out is None:
@@ -262,7 +291,7 @@ class VariantEngine:
         """(rows, spectrograms) per batch of one variant's simulator ``sim``, differentiable in its
         effect parameters (the base part is computed without gradient; appended points are not reused)."""
         idx = np.asarray(idx, dtype=np.int64)
-        for rows in self._batches(idx):
+        for _, rows in self._batches(idx):
             inputs = self._inputs(rows)
             with torch.no_grad():
                 base = self._base(inputs, rows)
