@@ -17,11 +17,17 @@ VARIANTS = [{}, {"noise": {"snr_db": 10.0}}, {"palm": {"radius_m": 0.03}},
             {"antenna_pattern": {"q": 6.0}}, {"sync_offset": {"offset_s": 0.05}}]
 
 
-@pytest.mark.parametrize("base", [{}, {"palm": {}}])
+@pytest.mark.parametrize("base", [{}, {"palm": {}}, {"multipath": {}}])
 def test_variants_match_full_simulation(radar, short_chain, base):
     rs, _, _ = rows(radar, short_chain, 2, seed=1)  # one- and two-hand rows (kept in this order)
     build = builder(radar, short_chain)
-    out = VariantEngine(build, base, rs, batch_size=2).spectrograms(VARIANTS)  # one batch: the same noise draws
+    engine = VariantEngine(build, base, rs, batch_size=2)
+    out = engine.spectrograms(VARIANTS)
+    paths = {k: p for (k, p) in engine.paths}
+    assert paths["noise"] == "signal" and paths["sync_offset"] == "full"
+    assert paths["forearm"] == "added"  # with a multipath base: the forearm points and their images
+    assert paths["palm"] == ("full" if "palm" in base else "added")  # a changed palm radius moves no point but its RCS
+    assert paths["antenna_pattern"] == ("reweighted" if not base else "full")  # one batch: the same noise draws
     for v, spec in zip(VARIANTS, out):
         sim = build(merge(base, v))
         with torch.no_grad():

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import logging
 import tempfile
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -231,6 +232,15 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
     if cache_dir is None and cfg.radarweightnet:
         tmp = tempfile.TemporaryDirectory(prefix="handradar-gap-")
         cache_dir = tmp.name
+    timings: dict[str, float] = {}
+    clock = [time.perf_counter()]
+
+    def lap(name: str) -> None:
+        now = time.perf_counter()
+        timings[name] = timings.get(name, 0.0) + now - clock[0]
+        clock[0] = now
+        log.info("%s: %.1f s", name, timings[name])
+
     try:
         features = None
         if "occlusion" in names or "occlusion" in base or cfg.radarweightnet:
@@ -239,6 +249,7 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
             features = cached_bone_features(data.rows.skeletons, data.rows.times, data.rows.masks,
                                             data.radar.wavelength_m, base_sim.hand, cache_dir, progress=progress)
             data.rows.visibility = features.visible_fraction()
+            lap("features")
         profiles = None
         if cfg.radarweightnet:
             from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
@@ -247,6 +258,7 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
             profiles = SlotProfileCache(cache_slot_profiles(base_sim, data.rows.skeletons, data.rows.masks, cache_dir,
                                                             times=data.rows.times, visibility=vis,
                                                             batch_size=cfg.batch_size, progress=progress))
+            lap("slot profile cache")
         runner = _Runner(data, build, cfg, progress)
         engine = VariantEngine(build, base, data.rows, batch_size=cfg.batch_size,
                                base_profiles=None if profiles is None else profiles.profiles)
@@ -261,7 +273,9 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
                 powers[int(r)] = pw[i]
 
         fits = runner.fit(engine, names, fit_idx, refine_idx, "step 1")
+        lap("fit")
         base_spec, cands = runner.evaluate(engine, fits, ev, None, "step 1", on_base=keep_power)
+        lap("evaluate")
         before_ssim, before_mse = runner.scores(base_spec, ev)
         bones.add(torch.stack([powers[int(r)] for r in ev]), data.measured[ev] - base_spec, base_spec)
         powers.clear()
@@ -290,6 +304,7 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
                 {"effect": c.effect, "params": c.params, "gap_closed_of_remaining": c.gap_closed, "ci95": list(c.ci95)}
                 for c in cands_k]})
             pool = [c for c in cands_k if c.significant(cfg.min_gap_closed)]
+            lap("greedy selection")
         after = {"effects": [c.effect for c in chosen], "ssim": float(current_ssim.mean()),
                  "mse": float(current_mse.mean()), "gap_closed": float(gap_closed(before_ssim, current_ssim)),
                  "params": {c.effect: c.params for c in chosen}}
@@ -324,6 +339,8 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
                                             cands, cfg, progress=progress)
             report["radarweightnet"] = readout
             result.rwn = rwn_spec
+            lap("radarweightnet")
+        report["timings_s"] = {k: round(v, 2) for k, v in timings.items()}
         return result
     finally:
         if tmp is not None:

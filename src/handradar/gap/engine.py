@@ -8,8 +8,9 @@ computed once; then each variant takes the cheapest path that gives its signal:
 
 - signal-stage effects only (noise): the base's summed signal goes through the variant's signal
   stage and the chain. Exact.
-- scatterer-stage effects that only append reflection points (palm, forearm, multipath on the
-  paper model): base signal + the profiles of the appended points. Exact (profiles add up).
+- scatterer-stage effects that only add reflection points (palm, forearm, multipath; also palm or
+  forearm with their multipath images on a base with multipath): base signal + the profiles of the
+  added points. Exact (profiles add up).
   Appended points whose positions equal those of the previous variant and whose amplitudes differ
   by a per-point factor constant in time (multipath's reflection coefficient, forearm's radius)
   reuse the stored per-point profiles scaled by that factor. Exact.
@@ -34,6 +35,7 @@ Public API:
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -78,17 +80,45 @@ def _same(a: torch.Tensor, b: torch.Tensor) -> bool:
     return a.shape == b.shape and bool(torch.equal(a, b))
 
 
-def _prefix(s: Scatterers, k: int) -> Scatterers:
-    return Scatterers(s.tx[:, :, :k], s.rx[:, :, :k], s.rcs_m2[:, :, :k], s.gain[:, :, :k], s.owner[:k])
-
-
-def _suffix(s: Scatterers, k: int) -> Scatterers:
-    return Scatterers(s.tx[:, :, k:], s.rx[:, :, k:], s.rcs_m2[:, :, k:], s.gain[:, :, k:], s.owner[k:])
-
-
 def _amplitude(s: Scatterers) -> torch.Tensor:
     """Amplitude factor sqrt(RCS) x gain (B, T, K): what differs between points at the same positions."""
     return torch.sqrt(s.rcs_m2.clamp_min(0.0)) * s.gain
+
+
+def _fingerprints(s: Scatterers) -> torch.Tensor:
+    """One float64 number per point (K,) from all its fields: equal points give equal numbers."""
+    g = torch.Generator().manual_seed(1234)
+    b, t = s.gain.shape[:2]
+    w = torch.rand(b, t, 8, generator=g, dtype=torch.float64) + 0.5
+    parts = (s.tx.double() * w[..., None, :3]).sum(-1) + (s.rx.double() * w[..., None, 3:6]).sum(-1) \
+        + s.rcs_m2.double() * w[..., 6:7] + s.gain.double() * w[..., 7:8]
+    return parts.sum((0, 1)) + 1e3 * s.owner.double()
+
+
+def extra_points(base: Scatterers, new: Scatterers) -> Scatterers | None:
+    """The points of ``new`` that are not in ``base`` if every base point is in ``new`` unchanged
+    (as multisets, in any order); None otherwise. Then new's signal = base's + the extra points'."""
+    if new.n_points < base.n_points:
+        return None
+    f0, f1 = _fingerprints(base), _fingerprints(new)
+    free = {}
+    for j, v in enumerate(f1.tolist()):
+        free.setdefault(v, []).append(j)
+    match = []
+    for v in f0.tolist():
+        js = free.get(v)
+        if not js:
+            return None
+        match.append(js.pop())
+    idx = torch.as_tensor(match, dtype=torch.long)
+    fields = ((base.tx, new.tx), (base.rx, new.rx), (base.rcs_m2, new.rcs_m2), (base.gain, new.gain))
+    if not all(torch.equal(a, b[:, :, idx]) for a, b in fields) or not torch.equal(base.owner, new.owner[idx]):
+        return None  # a fingerprint collision: treat as changed
+    rest = torch.ones(new.n_points, dtype=torch.bool)
+    rest[idx] = False
+    keep = torch.nonzero(rest).flatten()
+    return Scatterers(new.tx[:, :, keep], new.rx[:, :, keep], new.rcs_m2[:, :, keep], new.gain[:, :, keep],
+                      new.owner[keep])
 
 
 def constant_ratio(new: torch.Tensor, ref: torch.Tensor, rtol: float = 1e-5) -> torch.Tensor | None:
@@ -204,6 +234,7 @@ class VariantEngine:
         self.build, self.base, self.rows, self.batch_size = build, {k: dict(v) for k, v in base.items()}, rows, batch_size
         self.base_sim = build(self.base)
         self.base_profiles = base_profiles  # rows -> the base's slot profiles (e.g. from the slot-profile cache)
+        self.paths: Counter = Counter()  # (effects, path) -> batches: which shortcut each variant took
 
     def _batches(self, idx: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """(positions in idx, rows) per batch; rows that track the same hands share batches, so that a
@@ -231,22 +262,25 @@ class VariantEngine:
         sk, m, t, vis = inputs
         ctx, s0, p0, sum0 = base
         path = self._path(added)
+        key = ",".join(sorted(added))
         if path == "signal":
+            self.paths[key, "signal"] += 1
             return sum0
         if path == "scatterers":
             s1 = sim.scatterers(ctx)
-            k0 = s0.n_points
-            if s1.n_points > k0 and all(_same(a, b) for a, b in zip(
-                    (s1.tx[:, :, :k0], s1.rx[:, :, :k0], s1.rcs_m2[:, :, :k0], s1.gain[:, :, :k0], s1.owner[:k0]),
-                    (s0.tx, s0.rx, s0.rcs_m2, s0.gain, s0.owner))):
-                app = _suffix(s1, k0)
+            app = extra_points(s0, s1) if s1.n_points > s0.n_points else None
+            if app is not None:
+                self.paths[key, "added"] += 1
                 extra = store.signal(sim, app, ctx.times) if store is not None else \
                     profiles(sim, app, ctx.times).sum(1)
                 return sum0 if extra is None else sum0 + extra.to(sum0.dtype)
             w = slot_weights(s0, s1)
             if w is not None:
+                self.paths[key, "reweighted"] += 1
                 return sim.combine(p0, w, times=t)
+            self.paths[key, "full"] += 1
             return sim.combine(profiles(sim, s1, ctx.times))
+        self.paths[key, "full"] += 1
         ctx1 = sim.context(sk, m, times=t, visibility=vis)
         return sim.combine(profiles(sim, sim.scatterers(ctx1), ctx1.times))
 
