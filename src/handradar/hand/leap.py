@@ -205,6 +205,7 @@ def leap_frames_from_sequence(seq: HandSequence, radar_to_leap: np.ndarray, rada
     """Leap frames (dicts) for a radar-frame sequence: the inverse of :func:`read_leap_jsonl`."""
     m = np.asarray(radar_to_leap, dtype=np.float64)
     mm = seq.positions.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+    rate = float(1.0 / np.median(np.diff(seq.times)))  # once, not per frame (O(T^2) otherwise)
     for t in range(seq.n_steps):
         ts = int(round(seq.times[t] * 1e6 + radar_start_us))
         hands, pointables = [], []
@@ -213,6 +214,7 @@ def leap_frames_from_sequence(seq: HandSequence, radar_to_leap: np.ndarray, rada
                 continue
             hid = slot + 1
             j = mm[t, slot]
+            jr = j.round(3).tolist()  # one conversion per hand: per-joint tolist() dominated the cost
             palm = j[[0, 5, 9, 13, 17]].mean(axis=0)
             direction = j[9] - j[0]
             direction /= np.linalg.norm(direction) + 1e-12
@@ -221,14 +223,13 @@ def leap_frames_from_sequence(seq: HandSequence, radar_to_leap: np.ndarray, rada
             hands.append({"id": hid, "type": kind, "palmPosition": palm.round(3).tolist(),
                           "palmNormal": normal.round(5).tolist(), "direction": direction.round(5).tolist(),
                           "palmWidth": float(np.linalg.norm(j[5] - j[17]).round(3)),
-                          "wrist": j[0].round(3).tolist(), "elbow": (j[0] - 250.0 * direction).round(3).tolist()})
+                          "wrist": jr[0], "elbow": (j[0] - 250.0 * direction).round(3).tolist()})
             for f in range(5):
-                joints = j[1 + 4 * f: 5 + 4 * f]
-                carp = joints[0] if f == 0 else j[0] + 0.25 * (joints[0] - j[0])
-                p = {"handId": hid, "type": f, "width": finger_width_mm, "carpPosition": carp.round(3).tolist()}
-                p.update({k: joints[i].round(3).tolist() for i, k in enumerate(LEAP_JOINT_FIELDS)})
+                carp = jr[1] if f == 0 else (j[0] + 0.25 * (j[1 + 4 * f] - j[0])).round(3).tolist()
+                p = {"handId": hid, "type": f, "width": finger_width_mm, "carpPosition": carp}
+                p.update({k: jr[1 + 4 * f + i] for i, k in enumerate(LEAP_JOINT_FIELDS)})
                 pointables.append(p)
-        yield {"id": t, "timestamp": ts, "currentFrameRate": float(1.0 / np.median(np.diff(seq.times))),
+        yield {"id": t, "timestamp": ts, "currentFrameRate": rate,
                "hands": hands, "pointables": pointables}
 
 

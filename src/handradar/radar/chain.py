@@ -58,7 +58,7 @@ class ChainConfig:
     stft_len: int = 64
     stft_hop: int = 64
     n_columns: int = 32
-    dynamic_range_db: float = 40.0
+    dynamic_range_db: float = 30.0
     clutter_removal: bool = True
 
     def __post_init__(self) -> None:
@@ -213,8 +213,15 @@ def measured_spectrogram(adc: np.ndarray | torch.Tensor, radar: RadarConfig, cha
     The window is chosen on the whole capture; its spectrogram is then computed from the window's
     frames alone, exactly as the simulator computes it, so both see the same clutter mean.
     """
-    adc_t = torch.as_tensor(adc)
-    profiles = range_profiles_from_adc(adc_t, radar, chain)
+    return capture_spectrogram(range_profiles_from_adc(torch.as_tensor(adc), radar, chain), radar, chain)
+
+
+def capture_spectrogram(profiles: torch.Tensor, radar: RadarConfig, chain: ChainConfig) -> tuple[torch.Tensor, int]:
+    """A whole capture's per-range-bin signal (frames, loops, channels, bins) -> (spectrogram, window start frame).
+
+    The second half of :func:`measured_spectrogram`, shared with generators that reach the
+    per-range-bin signal without an ADC cube (the reference world's fast path).
+    """
     fpw = chain.frames_per_window(radar)
     if profiles.shape[-4] < fpw:
         raise ValueError(f"capture has {profiles.shape[-4]} frames, fewer than the {fpw} of one spectrogram")

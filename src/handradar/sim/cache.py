@@ -2,7 +2,7 @@
 
 The per-slot range profiles (B, 39, F, L, Ch, bins) of a dataset do not depend on RadarWeightNet,
 so they are computed once and stored: float16 real/imag pairs scaled by a per-row float32 factor
-(the row's largest |real| or |imag|), i.e. ~5e-4 relative precision, far inside the chain's 40 dB
+(the row's largest |real| or |imag|), i.e. ~5e-4 relative precision, far inside the chain's 30 dB
 floor. 39 x 2048 chirps x 8 bins x 2 x 2 bytes = 2.6 MB per example (default radar); rows are HDF5
 chunks compressed with lzf, so the 19 all-zero slots of an untracked hand cost almost nothing on
 disk. ``active`` (N, 38) records the non-zero bone slots, so that a batch of one-hand examples

@@ -1,1 +1,22 @@
-"""handradar.world"""
+"""The reference world: a finer, independent generator of paired radar + Leap recordings.
+
+It stands in for a capture rig (DESIGN section 6): gesture kinematics on per-subject skeletons
+(:mod:`.kinematics`), a faceted radar scene with shadowing, palm, forearm, multipath and an antenna
+pattern (:mod:`.scene`), ADC and fast signal paths (:mod:`.render`), a Leap sensor model
+(:mod:`.sensor`) and the drivers that write recordings and datasets (:mod:`.generate`). It never
+imports handradar.sim: the simulator is measured against it.
+"""
+
+from handradar.world.config import EFFECTS, VOCABULARY, WorldConfig, world_config
+from handradar.world.generate import (
+    RecordingSpec,
+    build_world_dataset,
+    fast_example,
+    recording_specs,
+    simulate,
+    write_recording,
+    write_world_recordings,
+)
+
+__all__ = ["EFFECTS", "VOCABULARY", "RecordingSpec", "WorldConfig", "build_world_dataset", "fast_example",
+           "recording_specs", "simulate", "world_config", "write_recording", "write_world_recordings"]

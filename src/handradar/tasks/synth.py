@@ -1,0 +1,150 @@
+"""Fitting RadarWeightNet to measured spectrograms: the paper's hybrid synthesis (Table I).
+
+Per row, the network-independent parts (per-bone features, per-slot range profiles) come from the
+caches of :func:`handradar.sim.cache.cache_dataset`; a training step is then only
+
+    features -> RadarWeightNet -> weights (B, T, 38) -> Simulator.combine (weighted slot sum at the
+    chirp times) -> Simulator.spectrogram (the shared chain) -> 1 - SSIM against the measurement.
+
+The paper's optimisation set-up is a list of phases (Adam; lr 5e-4, batch 32, 20 epochs; then
+lr 1e-4, batch 16, 50 epochs): the learning rate changes at phase boundaries and the training
+loader is rebuilt every epoch with the phase's batch size. Shuffling depends only on (seed, epoch).
+
+Public API:
+
+    Phase(epochs, lr, batch_size)
+    Pairs / load_pairs(caches, targets (N, 64, 32), rows) -> Pairs     in-memory training data
+    SynthFitModule(sim, net, train: Pairs, phases, seed)                 the LightningModule
+    predict(sim, net | None, pairs, batch_size=32) -> (N, 64, 32)         None: modelling only
+    synth_scores(sim, net, pairs) -> {"ssim_model", "ssim_enhanced", "mse_model", "mse_enhanced"}
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import lightning.pytorch as pl
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, TensorDataset
+
+from handradar.gap.stats import per_example_mse, per_example_ssim
+from handradar.models.losses import fast_ssim_loss
+from handradar.models.radar_weight_net import RadarWeightNet
+from handradar.sim.cache import DatasetCaches, unpack
+from handradar.sim.simulator import Simulator
+
+
+@dataclass(frozen=True)
+class Phase:
+    """One stage of the optimisation schedule."""
+
+    epochs: int
+    lr: float
+    batch_size: int
+
+
+PAPER_SCHEDULE = (Phase(20, 5e-4, 32), Phase(50, 1e-4, 16))
+
+
+@dataclass
+class Pairs:
+    """Rows of a dataset held in memory: network inputs, cached slot profiles and targets."""
+
+    rows: np.ndarray  # (N,) row indices into the dataset file
+    features: torch.Tensor  # (N, T, 2, 19, 5) float32
+    masks: torch.Tensor  # (N, T, 2) bool
+    packed: torch.Tensor  # (N, 39, F, L, Ch, bins, 2) float16 (handradar.sim.cache.pack)
+    scale: torch.Tensor  # (N,) float32
+    active: torch.Tensor  # (N, 38) bool: bone slots that reflect anything
+    targets: torch.Tensor  # (N, 64, 32) float32 measured spectrograms in [0, 1]
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def subset(self, idx: np.ndarray | torch.Tensor) -> Pairs:
+        i = torch.as_tensor(np.asarray(idx), dtype=torch.long)
+        return Pairs(self.rows[i.numpy()], self.features[i], self.masks[i], self.packed[i], self.scale[i],
+                     self.active[i], self.targets[i])
+
+
+def load_pairs(caches: DatasetCaches, targets: np.ndarray, rows: np.ndarray) -> Pairs:
+    """Gather ``rows`` of the cached features/profiles and their measured spectrograms."""
+    rows = np.asarray(rows, dtype=np.int64)
+    packed, scale, active = caches.profiles.load(rows)
+    return Pairs(rows=rows, features=torch.as_tensor(caches.features.features[rows], dtype=torch.float32),
+                 masks=torch.as_tensor(caches.masks[rows], dtype=torch.bool), packed=packed, scale=scale,
+                 active=torch.as_tensor(active, dtype=torch.bool),
+                 targets=torch.as_tensor(np.asarray(targets)[rows], dtype=torch.float32))
+
+
+def _spectrograms(sim: Simulator, net: RadarWeightNet | None, p: Pairs) -> torch.Tensor:
+    profiles = unpack(p.packed, p.scale)
+    weights = None if net is None else net(p.features, p.masks)
+    return sim.spectrogram(sim.combine(profiles, weights, active=p.active.any(0)))
+
+
+@torch.no_grad()
+def predict(sim: Simulator, net: RadarWeightNet | None, pairs: Pairs, batch_size: int = 32) -> torch.Tensor:
+    """Simulated spectrograms (N, 64, 32) of ``pairs``: modelling only when ``net`` is None."""
+    if net is not None:
+        net.eval()
+    out = [_spectrograms(sim, net, pairs.subset(np.arange(i, min(i + batch_size, len(pairs)))))
+           for i in range(0, len(pairs), batch_size)]
+    return torch.cat(out)
+
+
+def synth_scores(sim: Simulator, net: RadarWeightNet, pairs: Pairs) -> dict[str, float]:
+    """Table I: SSIM and MSE against the measurement, modelling only vs modelling + RadarWeightNet."""
+    out = {}
+    for name, n in (("model", None), ("enhanced", net)):
+        pred = predict(sim, n, pairs)
+        out[f"ssim_{name}"] = float(per_example_ssim(pairs.targets, pred).mean())
+        out[f"mse_{name}"] = float(per_example_mse(pairs.targets, pred).mean())
+    return out
+
+
+class SynthFitModule(pl.LightningModule):
+    """Trains RadarWeightNet (the simulator is fixed) with the SSIM loss, phase by phase."""
+
+    def __init__(self, sim: Simulator, net: RadarWeightNet, train: Pairs, phases: Sequence[Phase] = PAPER_SCHEDULE,
+                 seed: int = 0) -> None:
+        super().__init__()
+        if not phases:
+            raise ValueError("the optimisation schedule needs at least one phase")
+        self.sim, self.net, self.train_pairs = sim, net, train
+        self.phases = tuple(p if isinstance(p, Phase) else Phase(**p) for p in phases)
+        self.seed = int(seed)
+        self.sim.requires_grad_(False)
+
+    @property
+    def total_epochs(self) -> int:
+        return sum(p.epochs for p in self.phases)
+
+    def phase(self, epoch: int) -> Phase:
+        for p in self.phases:
+            if epoch < p.epochs:
+                return p
+            epoch -= p.epochs
+        return self.phases[-1]
+
+    def train_dataloader(self) -> DataLoader:
+        from handradar.tasks.fitting import EpochSeededSampler
+
+        epoch = self.trainer.current_epoch if self._trainer is not None else 0
+        n = len(self.train_pairs)
+        return DataLoader(TensorDataset(torch.arange(n)), batch_size=min(self.phase(epoch).batch_size, n),
+                          sampler=EpochSeededSampler(n, self.seed))
+
+    def training_step(self, batch: list[torch.Tensor], batch_idx: int) -> torch.Tensor:
+        p = self.train_pairs.subset(batch[0])
+        loss = fast_ssim_loss(_spectrograms(self.sim, self.net, p), p.targets)
+        self.log("synth/train_loss", loss, on_step=False, on_epoch=True, batch_size=len(p))
+        return loss
+
+    def configure_optimizers(self):
+        opt = torch.optim.Adam(self.net.parameters(), lr=self.phases[0].lr)
+        lr0 = self.phases[0].lr
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda epoch: self.phase(epoch).lr / lr0)
+        return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "epoch"}}
