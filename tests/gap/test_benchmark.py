@@ -80,7 +80,9 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
     assert (tmp_path / "run" / "cases" / "antenna_pattern" / "gap_report.json").is_file()
     assert len(CALLS) == 2 and all(c["subjects"] == 1 for c in CALLS)
     CALLS.clear()
+    md.write_text(md.read_text() + "hand-written analysis\n")
     run_benchmark(cfg, tmp_path / "run2")  # every case resumes from the state folder: no world is built
     assert CALLS == []
+    assert md.read_text().endswith("hand-written analysis\n")  # notes below the marker survive
     with h5py.File(next((tmp_path / "cache" / "world").glob("fake_none.h5")), "r") as h5:
         assert "truth" not in h5.attrs  # the diagnosed data never carry the truth

@@ -46,6 +46,7 @@ from handradar.sim.effects import EFFECT_NAMES
 
 log = logging.getLogger(__name__)
 
+NOTES_MARKER = "<!-- notes: text below this line is kept when the benchmark rewrites the file -->"
 CONTROL_NOTHING = "nothing"
 CONTROL_OUTSIDE = "iq_imbalance"  # the reference world's effect outside the vocabulary
 
@@ -211,7 +212,12 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             rel_s = rel.relative_to(md_path.resolve().parent).as_posix()
         except ValueError:
             rel_s = str(rel)
-        atomic_write_text(md_path, results_markdown(results, scores, rel_s, settings))
+        notes = ""
+        if md_path.is_file():  # hand-written analysis below the marker survives a regeneration
+            old = md_path.read_text()
+            if NOTES_MARKER in old:
+                notes = old[old.index(NOTES_MARKER):]
+        atomic_write_text(md_path, results_markdown(results, scores, rel_s, settings) + "\n" + (notes or NOTES_MARKER + "\n"))
         atomic_write_text(out / "benchmark.json", json.dumps({"results": results, "scores": scores,
                                                               "settings": settings}, indent=1) + "\n")
         if tracker is not None:
