@@ -101,15 +101,17 @@ def extra_points(base: Scatterers, new: Scatterers) -> Scatterers | None:
     if new.n_points < base.n_points:
         return None
     f0, f1 = _fingerprints(base), _fingerprints(new)
-    free = {}
-    for j, v in enumerate(f1.tolist()):
-        free.setdefault(v, []).append(j)
+    # equal points give equal fingerprints up to summation rounding (the layouts differ): match within
+    # a relative 1e-9, then check the matched points exactly
+    close = (f0[:, None] - f1[None, :]).abs() <= 1e-9 * f0.abs().clamp_min(1.0)[:, None]
+    used = torch.zeros(new.n_points, dtype=torch.bool)
     match = []
-    for v in f0.tolist():
-        js = free.get(v)
-        if not js:
+    for i in range(base.n_points):
+        js = torch.nonzero(close[i] & ~used).flatten()
+        if js.numel() == 0:
             return None
-        match.append(js.pop())
+        used[js[0]] = True
+        match.append(int(js[0]))
     idx = torch.as_tensor(match, dtype=torch.long)
     fields = ((base.tx, new.tx), (base.rx, new.rx), (base.rcs_m2, new.rcs_m2), (base.gain, new.gain))
     if not all(torch.equal(a, b[:, :, idx]) for a, b in fields) or not torch.equal(base.owner, new.owner[idx]):
