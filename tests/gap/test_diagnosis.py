@@ -45,7 +45,8 @@ def test_null_data_give_none(radar, short_chain):
 
 def test_gap_outside_the_vocabulary_gives_none(radar, short_chain):
     # a receiver IQ imbalance (mirror image at the opposite Doppler): no candidate effect makes it
-    data = gap_data(radar, short_chain, 12, {}, distort=lambda s: s + 0.3 * s.conj())
+    # 24 rows: a percentile bootstrap over a handful of evaluation rows is too narrow to trust
+    data = gap_data(radar, short_chain, 24, {}, seed=2, distort=lambda s: s + 0.3 * s.conj())
     rep = run(radar, short_chain, data).report
     assert rep["baseline"]["ssim"] < 0.99  # there is a gap ...
     assert rep["cause"] == "none"  # ... that nothing in the vocabulary explains

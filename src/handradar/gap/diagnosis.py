@@ -225,6 +225,9 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
     order = list(EFFECT_NAMES) + sorted(set(REGISTRY) - set(EFFECT_NAMES))
     names = [n for n in order if n not in base and (cfg.candidates is None or n in cfg.candidates)]
     cal, ev = stratified_split(data.labels, cfg.calibration_fraction, cfg.seed)
+    if len(ev) < 20:
+        log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
+                    "(use 30 or more)", len(ev))
     fit_idx = _subset(data.labels, cal, cfg.fit_rows, cfg.seed + 1)
     refine_idx = _subset(data.labels, cal, cfg.refine_rows, cfg.seed + 2)
     base_sim = build(base)
