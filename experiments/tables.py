@@ -1,0 +1,125 @@
+"""Paper-style result tables from the MLflow runs of train.py jobs (``make tables``).
+
+    python -m experiments.tables [--tracking-uri URI] [--out DIR]
+
+Reads every FINISHED run tagged by handradar (the latest one per job hash, so a re-run job counts
+once), and writes into DIR (default logs/results):
+
+- ``tables.md`` with Tables II (few-shot), III (pre-training) and IV (OOD), each cell the mean ±
+  standard deviation over seeds; ``table2_few_shot.csv`` etc. with mean, std and n columns;
+- ``confusion/<preset>[_fixed]_<variant>.png``: confusion matrices summed over seeds.
+
+The last line printed is the path of tables.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from handradar.atomic import atomic_write_text
+from handradar.provenance import REPO_ROOT
+from handradar.tasks.report import build_tables
+from handradar.tasks.tracking import TAG_PREFIX, Tracker, sqlite_path
+
+DEFAULT_URI = f"sqlite:///{REPO_ROOT / 'logs' / 'mlflow' / 'mlflow.db'}"
+log = logging.getLogger(__name__)
+
+
+def load_records(tracking_uri: str) -> list[dict]:
+    """Finished handradar runs as ``{"params", "metrics", "tags", "run_id"}``, latest per job hash."""
+    db = sqlite_path(tracking_uri)
+    if db is not None and not db.is_file():  # nothing has run yet: do not create a store
+        log.warning("no MLflow store at %s", db)
+        return []
+    tracker = Tracker(tracking_uri, "", retries=8)
+
+    def search(client) -> list:
+        exps = [e.experiment_id for e in client.search_experiments()]
+        runs, token = [], None
+        while exps:  # pages of 1000 runs
+            page = client.search_runs(exps, filter_string="attributes.status = 'FINISHED'", max_results=1000,
+                                      order_by=["attributes.start_time DESC"], page_token=token)
+            runs += list(page)
+            token = page.token
+            if not token:
+                break
+        return runs
+
+    latest: dict[str, dict] = {}
+    for run in tracker._call(search):
+        tags = run.data.tags
+        key = tags.get(f"{TAG_PREFIX}job_hash")
+        if key is None or key in latest:  # not a handradar job, or an older run of the same job
+            continue
+        latest[key] = {"params": dict(run.data.params), "metrics": dict(run.data.metrics), "tags": dict(tags),
+                       "run_id": run.info.run_id}
+    return list(latest.values())
+
+
+def confusion_group(rec: dict) -> str:
+    p = rec["params"]
+    fixed = p.get("split.kind", "few_shot") == "few_shot" and p.get("split.test") == "fixed" and p.get("job") == "variants"
+    return rec["tags"].get(f"{TAG_PREFIX}preset", "run") + ("_fixed" if fixed else "")
+
+
+def write_confusions(tracking_uri: str, records: list[dict], out: Path) -> list[Path]:
+    """Confusion matrices summed over the seeds of each (preset, variant), as PNGs."""
+    from handradar.viz.confusion import plot_confusion
+
+    tracker = Tracker(tracking_uri, "")
+    sums: dict[tuple[str, str], np.ndarray] = {}
+    classes: dict[tuple[str, str], list[str]] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, rec in enumerate(records):
+            try:
+                files = tracker._call(lambda c: c.list_artifacts(rec["run_id"], "confusion"))
+            except Exception as exc:  # an artifact store that moved: the tables still come out
+                log.warning("no confusion matrices for run %s: %s", rec["run_id"], exc)
+                continue
+            for f in files:
+                local = tracker._call(lambda c: c.download_artifacts(rec["run_id"], f.path, f"{tmp}/{i}"))
+                obj = json.loads(Path(local).read_text())
+                key = (confusion_group(rec), Path(f.path).stem)
+                m = np.asarray(obj["matrix"], dtype=np.int64)
+                sums[key] = sums[key] + m if key in sums and sums[key].shape == m.shape else m
+                classes[key] = obj["classes"]
+    paths = []
+    for (group, variant), m in sorted(sums.items()):
+        paths.append(plot_confusion(m, classes[(group, variant)], out / "confusion" / f"{group}_{variant}.png",
+                                    title=f"{group} {variant}"))
+    return paths
+
+
+def main(argv: list[str] | None = None) -> Path:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tracking-uri", default=DEFAULT_URI, help=f"MLflow store (default {DEFAULT_URI})")
+    ap.add_argument("--out", type=Path, default=REPO_ROOT / "logs" / "results", help="output folder")
+    ap.add_argument("--no-figures", action="store_true", help="skip the confusion-matrix PNGs")
+    args = ap.parse_args(argv)
+    records = load_records(args.tracking_uri)
+    tables = build_tables(records)
+    args.out.mkdir(parents=True, exist_ok=True)
+    sections = [f"# handradar results\n\n{len(records)} finished jobs from {args.tracking_uri}\n"]
+    for t in tables:
+        sections.append(t.markdown())
+        atomic_write_text(args.out / f"{t.name}.csv", t.csv())
+    if not tables:
+        sections.append("(no finished train.py jobs found)")
+    md = args.out / "tables.md"
+    atomic_write_text(md, "\n\n".join(sections) + "\n")
+    if not args.no_figures:
+        write_confusions(args.tracking_uri, records, args.out)
+    print("\n\n".join(sections[1:]))
+    print(md)
+    return md
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

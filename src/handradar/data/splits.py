@@ -1,0 +1,163 @@
+"""Seeded, class-stratified splits of a dataset's rows for the few-shot and OOD experiments.
+
+Every split is a :class:`Split` of row indices into one dataset file:
+
+- ``train``: rows whose *radar* spectrograms train the classifier (the few-shot real data);
+- ``pool``: every non-test row. Its *skeletons* may be synthesised (the radar data of rows outside
+  ``train`` are not used, but their Leap skeletons are still available); ``train`` is a subset;
+- ``test``: rows the classifier is evaluated on; disjoint from ``pool``.
+
+Sampling is stratified by class: each class gets ``max(1, round(fraction * n_class))`` rows, taken
+as a prefix of a per-class permutation seeded by ``(seed, class)``. Prefixes make the few-shot sets
+of one seed nested (the 5 % rows are among the 20 % rows) and a class's draw independent of which
+other classes exist.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+OOD_KINDS = ("angle", "subject", "hands", "occlusion")
+
+
+@dataclass(frozen=True)
+class Split:
+    """Row indices (sorted int64 arrays) into one dataset; see the module docstring."""
+
+    train: np.ndarray
+    pool: np.ndarray
+    test: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("train", "pool", "test"):
+            object.__setattr__(self, name, np.sort(np.asarray(getattr(self, name), dtype=np.int64)))
+        if not np.isin(self.train, self.pool).all():
+            raise ValueError("split: train rows must be part of the pool")
+        if np.intersect1d(self.pool, self.test).size:
+            raise ValueError("split: test rows overlap the training pool")
+
+    def sizes(self) -> dict[str, int]:
+        return {"n_train": len(self.train), "n_pool": len(self.pool), "n_test": len(self.test)}
+
+
+def _class_permutation(rows: np.ndarray, seed: int, cls: int) -> np.ndarray:
+    rng = np.random.default_rng([int(seed), int(cls) + 1])
+    return rows[rng.permutation(len(rows))]
+
+
+def stratified_sample(labels: np.ndarray, fraction: float, seed: int, rows: np.ndarray | None = None) -> np.ndarray:
+    """``max(1, round(fraction * n_c))`` rows of each class ``c`` among ``rows`` (default: all)."""
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"fraction must be in (0, 1], found {fraction}")
+    labels = np.asarray(labels)
+    rows = np.arange(len(labels)) if rows is None else np.asarray(rows, dtype=np.int64)
+    picked = []
+    for c in np.unique(labels[rows]):
+        members = np.sort(rows[labels[rows] == c])
+        k = max(1, int(round(fraction * len(members))))
+        picked.append(_class_permutation(members, seed, c)[:k])
+    return np.sort(np.concatenate(picked)) if picked else np.zeros(0, dtype=np.int64)
+
+
+def few_shot_split(labels: np.ndarray, fraction: float, *, seed: int,
+                   test: Literal["remainder", "fixed"] = "remainder", test_fraction: float = 0.2,
+                   test_seed: int = 0) -> Split:
+    """Few-shot split: ``fraction`` of the real radar data of each class trains the classifier.
+
+    test="remainder": the test set is every row not drawn (the pool is the drawn rows).
+    test="fixed": a test set of ``test_fraction`` of each class drawn with ``test_seed`` (the same
+    for every seed and fraction: the paper's starred rows); ``fraction`` of each class of the
+    *complete* dataset is then drawn from the rest, and the pool is every non-test row.
+    """
+    labels = np.asarray(labels)
+    every = np.arange(len(labels))
+    if test == "remainder":
+        train = stratified_sample(labels, fraction, seed)
+        return Split(train=train, pool=train, test=np.setdiff1d(every, train))
+    if test == "fixed":
+        test_rows = stratified_sample(labels, test_fraction, test_seed)
+        pool = np.setdiff1d(every, test_rows)
+        train = []
+        for c in np.unique(labels[pool]):
+            members = np.sort(pool[labels[pool] == c])
+            k = min(len(members), max(1, int(round(fraction * np.count_nonzero(labels == c)))))
+            train.append(_class_permutation(members, seed, c)[:k])
+        return Split(train=np.concatenate(train), pool=pool, test=test_rows)
+    raise ValueError(f"test protocol must be 'remainder' or 'fixed', found {test!r}")
+
+
+def ood_field(kind: str) -> str:
+    """The meta field an OOD split separates on."""
+    fields = {"angle": "angle_deg", "subject": "subject", "hands": "hands", "occlusion": "occlusion"}
+    if kind not in fields:
+        raise ValueError(f"OOD split kind must be one of {OOD_KINDS}, found {kind!r}")
+    return fields[kind]
+
+
+def default_train_values(kind: str, values: np.ndarray, seed: int, test_subjects: float = 0.25) -> list:
+    """The in-distribution values of an OOD split.
+
+    angle: 0 deg (test +/-30); hands: 1 (single-hand -> double-hand); occlusion: without -> with;
+    subject: all but ``ceil(test_subjects * n_subjects)`` subjects drawn with ``seed``.
+    """
+    if kind == "angle":
+        return [0]
+    if kind == "hands":
+        return [1]
+    if kind == "occlusion":
+        return [False]
+    if kind == "subject":
+        subjects = np.unique(values)
+        if len(subjects) < 2:
+            raise ValueError(f"subject split needs at least 2 subjects, found {list(subjects)}")
+        n_test = min(len(subjects) - 1, max(1, int(np.ceil(test_subjects * len(subjects)))))
+        held = np.random.default_rng([int(seed), 7919]).permutation(subjects)[:n_test]
+        return sorted(set(subjects.tolist()) - set(held.tolist()))
+    raise ValueError(f"OOD split kind must be one of {OOD_KINDS}, found {kind!r}")
+
+
+def ood_split(labels: np.ndarray, values: np.ndarray, train_values: Sequence, *, seed: int,
+              fraction: float = 1.0, test_fraction: float = 0.5) -> Split:
+    """Out-of-distribution split on one meta field.
+
+    Rows whose ``values`` are in ``train_values`` are in-distribution: ``fraction`` of each class of
+    them trains the classifier. The other rows are out-of-distribution: ``test_fraction`` of each of
+    their classes is the test set; the remaining OOD rows join the pool (their skeletons may be
+    synthesised, their radar data are never used).
+    """
+    labels = np.asarray(labels)
+    values = np.asarray(values)
+    inside = np.isin(values, list(train_values))
+    in_rows, out_rows = np.flatnonzero(inside), np.flatnonzero(~inside)
+    if not len(in_rows) or not len(out_rows):
+        raise ValueError(f"OOD split on values {sorted(set(values.tolist()))} with in-distribution {list(train_values)}: "
+                         f"{len(in_rows)} in-distribution and {len(out_rows)} out-of-distribution rows; both must be > 0")
+    train = stratified_sample(labels, fraction, seed, in_rows)
+    test = stratified_sample(labels, test_fraction, seed, out_rows)
+    pool = np.setdiff1d(np.arange(len(labels)), test)
+    return Split(train=train, pool=pool, test=test)
+
+
+def make_split(spec: dict, labels: np.ndarray, meta: dict[str, np.ndarray], seed: int) -> Split:
+    """The split a preset's ``split`` config names (``kind: few_shot`` or ``kind: ood``)."""
+    kind = spec.get("kind", "few_shot")
+    if kind == "few_shot":
+        return few_shot_split(labels, float(spec["fraction"]), seed=seed, test=spec.get("test", "remainder"),
+                              test_fraction=float(spec.get("test_fraction", 0.2)), test_seed=int(spec.get("test_seed", 0)))
+    if kind == "ood":
+        ood = spec["ood"]
+        field = ood_field(ood)
+        if field not in meta:
+            raise ValueError(f"OOD split '{ood}' needs the meta field '{field}', which the dataset lacks "
+                             f"(fields: {sorted(meta)})")
+        values = meta[field]
+        train_values = spec.get("train_values")
+        if train_values is None:
+            train_values = default_train_values(ood, values, seed, float(spec.get("test_subjects", 0.25)))
+        return ood_split(labels, values, list(train_values), seed=seed, fraction=float(spec.get("fraction", 1.0)),
+                         test_fraction=float(spec.get("test_fraction", 0.5)))
+    raise ValueError(f"split kind must be 'few_shot' or 'ood', found {kind!r}")

@@ -1,0 +1,145 @@
+"""Resumable, reproducible Lightning fits: loaders, seeding, checkpoints.
+
+A fit is a function of the seed alone, also across an interruption: the shuffling order of an
+epoch depends only on (seed, epoch) (:class:`EpochSeededSampler`, which Lightning advances through
+``set_epoch``), and every training step reseeds torch's global generator from (seed, step, rank)
+(:class:`StepSeed`, so dropout masks and GAN noise do not depend on the history of the
+process). A fit resumes from ``<ckpt_dir>/last.ckpt`` (:class:`EpochStartCheckpoint`, rewritten as
+each epoch starts), so a job killed during epoch k repeats only epoch k and ends with the same weights.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import lightning.pytorch as pl
+import numpy as np
+import torch
+from hydra.utils import instantiate
+from lightning.pytorch.callbacks import Callback
+from lightning.pytorch.loggers.logger import Logger
+from lightning.pytorch.utilities import rank_zero_only
+from omegaconf import DictConfig, OmegaConf
+from torch.utils.data import DataLoader, Sampler, TensorDataset
+
+from handradar.tasks.tracking import Tracker
+
+log = logging.getLogger(__name__)
+
+
+class EpochSeededSampler(Sampler[int]):
+    """A permutation of ``range(n)`` that depends only on (seed, epoch)."""
+
+    def __init__(self, n: int, seed: int) -> None:
+        self.n, self.seed, self.epoch = n, int(seed), 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __iter__(self) -> Iterator[int]:
+        g = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
+        return iter(torch.randperm(self.n, generator=g).tolist())
+
+
+class StepSeed(Callback):
+    """Reseed torch's global generator before every training batch from (seed, step, rank)."""
+
+    def __init__(self, seed: int) -> None:
+        self.seed = int(seed)
+
+    def on_train_batch_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule, batch: Any, batch_idx: int) -> None:
+        torch.manual_seed((self.seed * 1_000_003 + trainer.global_step) * 64 + trainer.global_rank)
+
+
+class EpochStartCheckpoint(Callback):
+    """Write ``<dirpath>/last.ckpt`` at the start of every epoch after the first.
+
+    Not ModelCheckpoint's end-of-epoch file: Lightning restores such a file as an unfinished
+    epoch and replays one extra optimizer step (Lightning issue #19403), so a resumed fit would
+    not match an uninterrupted one. At the start of epoch k, epochs 0..k-1 are complete in the
+    loop state, and a restore continues exactly with epoch k.
+
+    interval_s: skip epochs that start less than this long after the previous save (tiny datasets
+    have epochs of a few steps, and a ResNet checkpoint with its optimizer state is ~130 MB). When a
+    checkpoint is taken does not change the training, only how much a resume repeats.
+    """
+
+    def __init__(self, dirpath: str | Path, interval_s: float = 0.0) -> None:
+        self.path = Path(dirpath) / "last.ckpt"
+        self.interval_s = float(interval_s)
+        self._last = time.monotonic()
+
+    def on_train_batch_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule, batch: Any, batch_idx: int) -> None:
+        if batch_idx or trainer.current_epoch == 0 or trainer.fast_dev_run:
+            return
+        due = time.monotonic() - self._last >= self.interval_s
+        if trainer.world_size > 1:  # every rank must agree: saving is collective
+            due = bool(trainer.strategy.broadcast(due, src=0))
+        if due:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            trainer.save_checkpoint(self.path)  # rank 0 writes, atomically
+            self._last = time.monotonic()
+
+
+def tensor_loader(x: np.ndarray, y: np.ndarray, *, batch_size: int, seed: int, shuffle: bool = True,
+                  num_workers: int = 0, drop_last: bool = False) -> DataLoader:
+    """Spectrograms (N, 64, 32) and labels (N,) as a loader of ((B, 1, 64, 32), (B,)) batches."""
+    ds = TensorDataset(torch.as_tensor(np.asarray(x, dtype=np.float32))[:, None], torch.as_tensor(np.asarray(y, dtype=np.int64)))
+    sampler = EpochSeededSampler(len(ds), seed) if shuffle else None
+    return DataLoader(ds, batch_size=min(batch_size, len(ds)), sampler=sampler, num_workers=num_workers,
+                      drop_last=drop_last, persistent_workers=num_workers > 0)
+
+
+def make_trainer(trainer_cfg: DictConfig | Mapping, *, ckpt_dir: Path, seed: int, logger: Any = False,
+                 callbacks: Sequence[Callback] = (), overrides: Mapping[str, Any] | None = None,
+                 checkpoint_interval_s: float = 0.0) -> pl.Trainer:
+    """A Trainer from the ``trainer`` config plus resumable checkpointing into ``ckpt_dir``."""
+    cfg = OmegaConf.merge(trainer_cfg, dict(overrides or {}))
+    return instantiate(cfg, callbacks=[*callbacks, StepSeed(seed), EpochStartCheckpoint(ckpt_dir, checkpoint_interval_s)],
+                       logger=logger,
+                       default_root_dir=str(ckpt_dir), enable_checkpointing=False)
+
+
+def resumable_fit(trainer: pl.Trainer, module: pl.LightningModule, loader: DataLoader, ckpt_dir: Path) -> None:
+    """``trainer.fit`` that continues from ``ckpt_dir/last.ckpt`` when an earlier fit was interrupted."""
+    last = Path(ckpt_dir) / "last.ckpt"
+    if last.is_file():
+        log.info("resuming %s from %s", type(module).__name__, last)
+    trainer.fit(module, train_dataloaders=loader, ckpt_path=str(last) if last.is_file() else None)
+
+
+class TrackerLogger(Logger):
+    """Lightning logger that writes epoch metrics into the job's MLflow run under a prefix.
+
+    The MLflow step of an epoch-level metric is its epoch (Lightning's own step counter for epoch
+    metrics shifts by one after a resume)."""
+
+    def __init__(self, tracker: Tracker, prefix: str = "") -> None:
+        super().__init__()
+        self.tracker = tracker
+        self.prefix = prefix
+
+    @property
+    def name(self) -> str:
+        return "mlflow"
+
+    @property
+    def version(self) -> str:
+        return self.tracker.run_id or "offline"
+
+    @rank_zero_only
+    def log_hyperparams(self, params: Any, *args: Any, **kwargs: Any) -> None:
+        """The job logs its whole config once; per-fit hyperparameters add nothing."""
+
+    @rank_zero_only
+    def log_metrics(self, metrics: Mapping[str, float], step: int | None = None) -> None:
+        if "epoch" in metrics:
+            step = int(metrics["epoch"])
+        self.tracker.log_metrics({f"{self.prefix}{k}": v for k, v in metrics.items() if k != "epoch"}, step)

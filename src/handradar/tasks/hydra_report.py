@@ -1,0 +1,71 @@
+"""Hydra callback that reports every job of a multirun, failed ones included.
+
+Hydra's launchers already run the remaining jobs when one raises (the exception is stored in the
+job's return); this callback makes the outcome visible: each job appends a line to
+``<sweep dir>/jobs.jsonl`` (number, overrides, status, run dir, error) as it ends, in its own
+process (so joblib and SLURM workers report too), and the end of the multirun prints a summary
+and writes ``<sweep dir>/jobs_summary.txt``. Hydra's sweeper re-raises a failed job's exception
+before ``on_multirun_end``, so the summary is also registered to print at interpreter exit.
+"""
+
+from __future__ import annotations
+
+import atexit
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+from hydra.core.utils import JobReturn, JobStatus
+from hydra.experimental.callback import Callback
+from hydra.types import RunMode
+from omegaconf import DictConfig
+
+from handradar.tasks.tracking import _file_lock
+
+log = logging.getLogger(__name__)
+REPORT = "jobs.jsonl"
+
+
+class JobReport(Callback):
+    def __init__(self) -> None:
+        self._summarised = False
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        atexit.register(self._summary, Path(config.hydra.sweep.dir))
+
+    def on_job_end(self, config: DictConfig, job_return: JobReturn, **kwargs: Any) -> None:
+        hydra = config.hydra
+        if hydra.mode != RunMode.MULTIRUN:
+            return
+        failed = job_return.status == JobStatus.FAILED
+        error = job_return._return_value if failed else None
+        entry = {"num": int(hydra.job.num), "overrides": list(job_return.overrides or []),
+                 "status": "FAILED" if failed else "COMPLETED", "run_dir": str(hydra.runtime.output_dir),
+                 "error": None if error is None else f"{type(error).__name__}: {error}"}
+        sweep = Path(hydra.sweep.dir)
+        sweep.mkdir(parents=True, exist_ok=True)
+        with _file_lock(sweep / f"{REPORT}.lock"):
+            with open(sweep / REPORT, "a") as fh:
+                fh.write(json.dumps(entry) + "\n")
+        if failed:
+            log.error("job %d (%s) FAILED: %s", entry["num"], " ".join(entry["overrides"]), entry["error"])
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        self._summary(Path(config.hydra.sweep.dir))
+
+    def _summary(self, sweep: Path) -> None:
+        if self._summarised:
+            return
+        self._summarised = True
+        path = sweep / REPORT
+        entries = [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.is_file() else []
+        entries.sort(key=lambda e: e["num"])
+        failed = [e for e in entries if e["status"] != "COMPLETED"]
+        lines = [f"multirun: {len(entries) - len(failed)} of {len(entries)} jobs completed, {len(failed)} failed ({sweep})"]
+        for e in entries:
+            lines.append(f"  #{e['num']} {e['status']:9s} {' '.join(e['overrides'])}  {e['run_dir']}"
+                         + (f"\n      {e['error']}" if e["error"] else ""))
+        text = "\n".join(lines)
+        (sweep / "jobs_summary.txt").write_text(text + "\n")
+        print(text, flush=True)

@@ -1,0 +1,137 @@
+"""Result tables in the paper's layout, from job records (MLflow runs or one finished job).
+
+- Table II (few-shot): one row per real-data fraction and test protocol (``*``: the fixed test split
+  of the complete dataset), one column per variant (radar only, + model-based synthetic,
+  + RadarWeightNet-enhanced synthetic, + CGAN).
+- Table III (pre-training): one row per (classes, fraction), columns trained from scratch and
+  pre-trained on synthetic spectrograms of an external skeleton dataset.
+- Table IV (out of distribution): one row per OOD split, the four variant columns.
+
+Cells are ``mean ± std`` of the accuracy over the records of a row (seeds), with the count.
+A record is ``{"params": flat config (dotted keys -> str), "metrics": {name: float}}``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+VARIANT_COLUMNS = (
+    ("radar_only", "Radar only"),
+    ("model_synth", "+ model-based synthetic"),
+    ("enhanced_synth", "+ RadarWeightNet synthetic"),
+    ("cgan", "+ CGAN"),
+)
+OOD_LABELS = {
+    "angle": "angle (0° → ±30°)",
+    "subject": "subject (unseen subjects)",
+    "hands": "hands (single → double)",
+    "occlusion": "occlusion (without → with)",
+}
+PRETRAIN_METRIC = re.compile(r"^test/acc_(scratch|pretrained)_(\d+)c_(\d+)pct$")
+
+
+@dataclass
+class Table:
+    name: str
+    title: str
+    columns: list[str]
+    rows: dict[str, dict[str, list[float]]] = field(default_factory=dict)  # row -> column -> values
+    order: dict[str, tuple] = field(default_factory=dict)  # row -> sort key
+
+    def add(self, row: str, column: str, value: float, sort_key: tuple = ()) -> None:
+        self.rows.setdefault(row, {}).setdefault(column, []).append(float(value))
+        self.order.setdefault(row, sort_key)
+
+    def sorted_rows(self) -> list[str]:
+        return sorted(self.rows, key=lambda r: (self.order[r], r))
+
+    def markdown(self) -> str:
+        lines = [f"**{self.title}**", "", "| | " + " | ".join(self.columns) + " |",
+                 "|---|" + "---|" * len(self.columns)]
+        for r in self.sorted_rows():
+            lines.append(f"| {r} | " + " | ".join(mean_std(self.rows[r].get(c, [])) for c in self.columns) + " |")
+        return "\n".join(lines)
+
+    def csv(self) -> str:
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(["row", *[f"{c} {s}" for c in self.columns for s in ("mean", "std", "n")]])
+        for r in self.sorted_rows():
+            cells = []
+            for c in self.columns:
+                m, s, n = stats(self.rows[r].get(c, []))
+                cells += ["" if n == 0 else f"{m:.4f}", "" if n < 2 else f"{s:.4f}", n]
+            w.writerow([r, *cells])
+        return buf.getvalue()
+
+
+def stats(values: Sequence[float]) -> tuple[float, float, int]:
+    """Mean, sample standard deviation (ddof 1; nan below 2 values) and count."""
+    n = len(values)
+    if n == 0:
+        return math.nan, math.nan, 0
+    m = sum(values) / n
+    s = math.sqrt(sum((v - m) ** 2 for v in values) / (n - 1)) if n > 1 else math.nan
+    return m, s, n
+
+
+def mean_std(values: Sequence[float]) -> str:
+    m, s, n = stats(values)
+    if n == 0:
+        return "–"
+    if n == 1:
+        return f"{m:.3f}"
+    return f"{m:.3f} ± {s:.3f} (n={n})"
+
+
+def _pct(fraction: str | float) -> str:
+    return f"{float(fraction) * 100:g} %"
+
+
+def build_tables(records: Iterable[Mapping]) -> list[Table]:
+    """Tables II, III and IV from job records; a table without records is left out."""
+    variant_cols = [label for _, label in VARIANT_COLUMNS]
+    few = Table("table2_few_shot", "Table II: few-shot accuracy (* = fixed test split of the complete dataset)",
+                variant_cols)
+    pre = Table("table3_pretrain", "Table III: accuracy with and without pre-training on external synthetic data",
+                ["from scratch", "pre-trained"])
+    ood = Table("table4_ood", "Table IV: out-of-distribution accuracy", variant_cols)
+    for rec in records:
+        p, metrics = rec["params"], rec["metrics"]
+        kind = p.get("split.kind", "few_shot")
+        if p.get("job") not in ("variants", "external_pretrain"):
+            continue  # not a train.py job
+        if p.get("job") == "external_pretrain":
+            source = p.get("pretrain.source", "external")
+            for name, value in metrics.items():
+                m = PRETRAIN_METRIC.match(name)
+                if m:
+                    init, classes, pct = m.groups()
+                    pre.add(f"{classes} classes, {pct} % ({source})", "pre-trained" if init == "pretrained" else "from scratch",
+                            value, (-int(classes), int(pct)))
+            continue
+        if kind == "ood":
+            ood_kind = p.get("split.ood", "?")
+            row, table, key = OOD_LABELS.get(ood_kind, ood_kind), ood, (list(OOD_LABELS).index(ood_kind)
+                                                                        if ood_kind in OOD_LABELS else 9,)
+        elif "split.fraction" in p:
+            fixed = p.get("split.test", "remainder") == "fixed"
+            row, table, key = _pct(p["split.fraction"]) + ("*" if fixed else ""), few, (fixed, float(p["split.fraction"]))
+        else:
+            continue
+        for variant, label in VARIANT_COLUMNS:
+            value = metrics.get(f"test/acc_{variant}")
+            if value is not None:
+                table.add(row, label, value, key)
+    return [t for t in (few, pre, ood) if t.rows]
+
+
+def job_table(params: Mapping[str, str], metrics: Mapping[str, float]) -> str:
+    """The table rows of one finished job (what train.py prints at its end)."""
+    tables = build_tables([{"params": params, "metrics": metrics}])
+    return "\n\n".join(t.markdown() for t in tables) if tables else "(no table metrics)"

@@ -1,0 +1,194 @@
+"""MLflow tracking for train.py jobs: one run per job, safe for parallel jobs on one SQLite store.
+
+Parallel sweep jobs (joblib, SLURM arrays on a shared file system) writing to one SQLite file
+hit two known failures: the schema-migration race when several processes create a fresh
+database at once, and ``database is locked`` when writers collide. Every store operation here
+runs under an exclusive lock file beside the database (``<db>.lock``, ``fcntl.flock``) with
+SQLAlchemy's NullPool (no connection outlives its operation), so exactly one process touches
+the file at a time; a short retry on ``database is locked`` covers writers that do not take the
+lock (an ``mlflow ui`` reading the store). Stores that are not SQLite files (an MLflow server)
+need no lock.
+
+:class:`Tracker` is picklable (the client is created lazily), so Lightning's ddp_spawn can carry
+it into worker processes through :class:`handradar.tasks.fitting.TrackerLogger`. This module does
+not import torch or Lightning (the table builder and the tests' worker processes start fast).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import os
+import time
+from collections.abc import Callable, Iterator, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+MAX_PARAM_LEN = 500  # MLflow's limit on a parameter value
+TAG_PREFIX = "handradar."
+
+
+def sqlite_path(tracking_uri: str) -> Path | None:
+    """The database file of a ``sqlite:///`` URI (None for other stores)."""
+    prefix = "sqlite:///"
+    return Path(tracking_uri[len(prefix):]) if tracking_uri.startswith(prefix) else None
+
+
+@contextlib.contextmanager
+def _file_lock(path: Path | None) -> Iterator[None]:
+    if path is None:
+        yield
+        return
+    import fcntl  # POSIX only; SQLite on a shared file system is a POSIX set-up anyway
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def _flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(obj, Mapping):
+        out: dict[str, Any] = {}
+        for k, v in obj.items():
+            out.update(_flatten(v, f"{prefix}{k}."))
+        return out
+    return {prefix[:-1]: obj}
+
+
+class Tracker:
+    """One MLflow run. ``enabled=False`` makes every call a no-op (logger=none)."""
+
+    def __init__(self, tracking_uri: str, experiment_name: str, *, artifact_location: str | None = None,
+                 enabled: bool = True, retries: int = 8) -> None:
+        self.tracking_uri = tracking_uri
+        self.experiment_name = experiment_name
+        self.artifact_location = artifact_location
+        self.enabled = enabled
+        self.retries = retries
+        self.run_id: str | None = None
+        self._client = None
+
+    # -- plumbing ------------------------------------------------------------------------------
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_client"] = None
+        return state
+
+    def _lock_path(self) -> Path | None:
+        db = sqlite_path(self.tracking_uri)
+        return None if db is None else db.with_name(db.name + ".lock")
+
+    def _call(self, fn: Callable[[Any], T]) -> T:
+        """Run ``fn(client)`` under the store lock, retrying a locked database."""
+        delay = 0.05
+        for attempt in range(self.retries + 1):
+            try:
+                with _file_lock(self._lock_path()):
+                    if self._client is None:
+                        self._client = self._make_client()
+                    return fn(self._client)
+            except Exception as exc:  # MlflowException / OperationalError wrap the SQLite error
+                if "database is locked" not in str(exc) or attempt == self.retries:
+                    raise
+                log.warning("MLflow store busy (%s); retrying in %.2f s", exc, delay)
+                time.sleep(delay)
+                delay = min(delay * 2, 2.0)
+        raise AssertionError("unreachable")
+
+    def _make_client(self):
+        # NullPool: a pooled connection would keep the SQLite file open (and possibly locked)
+        # between our serialised operations.
+        os.environ.setdefault("MLFLOW_SQLALCHEMYSTORE_POOLCLASS", "NullPool")
+        os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
+        from mlflow import MlflowClient
+
+        db = sqlite_path(self.tracking_uri)
+        if db is not None:
+            db.parent.mkdir(parents=True, exist_ok=True)
+        return MlflowClient(tracking_uri=self.tracking_uri)
+
+    # -- run life cycle -----------------------------------------------------------------------
+    def start(self, *, run_id: str | None = None, run_name: str | None = None,
+              tags: Mapping[str, str] | None = None) -> str | None:
+        """Resume ``run_id`` when it exists in the store (an interrupted job), else create a run."""
+        if not self.enabled:
+            return None
+
+        def start(client) -> str:
+            if run_id is not None:
+                try:
+                    run = client.get_run(run_id)
+                    if run.info.lifecycle_stage == "active":
+                        client.update_run(run_id, status="RUNNING")
+                        return run_id
+                except Exception:  # the store was cleared: start afresh
+                    pass
+            exp = client.get_experiment_by_name(self.experiment_name)
+            if exp is None:
+                location = None if self.artifact_location is None else Path(self.artifact_location).resolve().as_uri()
+                exp_id = client.create_experiment(self.experiment_name, artifact_location=location)
+            else:
+                exp_id = exp.experiment_id
+            return client.create_run(exp_id, run_name=run_name, tags=dict(tags or {})).info.run_id
+
+        self.run_id = self._call(start)
+        return self.run_id
+
+    def end(self, status: str = "FINISHED") -> None:
+        if self.enabled and self.run_id is not None:
+            self._call(lambda c: c.set_terminated(self.run_id, status=status))
+
+    # -- logging ------------------------------------------------------------------------------
+    def log_params(self, params: Mapping[str, Any]) -> None:
+        """Flattened (``a.b.c``) parameters; values longer than MLflow's limit are cut.
+
+        MLflow refuses to change a logged parameter, and a resumed run logs its config again: keys
+        already present are skipped (a changed value, e.g. a moved data file, is only warned about).
+        """
+        if not self.enabled:
+            return
+        from mlflow.entities import Param
+
+        flat = {k: str(v)[:MAX_PARAM_LEN] for k, v in _flatten(params).items()}
+        existing = self._call(lambda c: c.get_run(self.run_id).data.params)
+        changed = sorted(k for k, v in flat.items() if k in existing and existing[k] != v)
+        if changed:
+            log.warning("MLflow run %s keeps its first values of %s", self.run_id, changed)
+        items = [Param(k, v) for k, v in sorted(flat.items()) if k not in existing]
+        for i in range(0, len(items), 100):  # MLflow's batch limit for params
+            self._call(lambda c, chunk=items[i:i + 100]: c.log_batch(self.run_id, params=chunk))
+
+    def set_tags(self, tags: Mapping[str, Any]) -> None:
+        if not self.enabled:
+            return
+        from mlflow.entities import RunTag
+
+        items = [RunTag(k, str(v)) for k, v in tags.items()]
+        self._call(lambda c: c.log_batch(self.run_id, tags=items))
+
+    def log_metrics(self, metrics: Mapping[str, float], step: int | None = None) -> None:
+        if not self.enabled or not metrics:
+            return
+        from mlflow.entities import Metric
+
+        now = int(time.time() * 1000)
+        items = [Metric(k, float(v), now, int(step or 0)) for k, v in metrics.items()
+                 if v is not None and math.isfinite(float(v))]
+        for i in range(0, len(items), 1000):
+            self._call(lambda c, chunk=items[i:i + 1000]: c.log_batch(self.run_id, metrics=chunk))
+
+    def log_artifact(self, path: str | Path, artifact_path: str | None = None) -> None:
+        if self.enabled:
+            self._call(lambda c: c.log_artifact(self.run_id, str(path), artifact_path))
+
+    def log_dict(self, obj: Any, name: str) -> None:
+        if self.enabled:
+            self._call(lambda c: c.log_dict(self.run_id, obj, name))

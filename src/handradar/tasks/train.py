@@ -1,0 +1,399 @@
+"""The train.py job: few-shot / OOD variants and external pre-training, resumable, logged to MLflow.
+
+A job (one composed config, one seed) trains several classifiers ("variants") and writes:
+
+- ``<run_dir>/metrics.json``: flat ``{"test/acc_<variant>": accuracy in [0, 1]}``;
+- ``<run_dir>/confusion/<variant>.json`` and ``<run_dir>/figures/confusion_<variant>.png``;
+- one MLflow run with the resolved config (params + ``config.yaml``), tags (preset, seed, code
+  version, data hash, job hash, run dir), per-epoch training metrics ``<variant>/train/*``, the
+  final metrics and the figures.
+
+Job kinds (``job``): ``variants`` trains one classifier per entry of ``variants``:
+``radar_only`` (the real training rows of the split), ``model_synth`` / ``enhanced_synth`` (the
+same + one synthetic spectrogram per training-pool row from ``synth.provider`` in mode
+``model`` / ``enhanced``), ``cgan`` (the same + CGAN samples, as many per class as the pool has
+rows). ``external_pretrain`` pre-trains on ``synth.external_provider`` data and fine-tunes on
+few-shot fractions of class subsets, against the same training from scratch. Any other job kind is
+a dotted function name ``fn(job: Job) -> {metric name: number}`` (e.g. a synthesis-fit job): it gets
+the loaded real data (``job.real``), the state folder (``job.state``, for resumable work), the
+tracker and ``job.cfg``, and its metrics go to metrics.json and MLflow like the built-in kinds.
+
+Resuming: the job's state (checkpoints, finished variants, CGAN samples, the MLflow run id) lives
+in ``<state_dir>/<job hash>``; the hash covers the config (paths, logging and caches excluded) and
+the real data's hash. Re-running the same command after an interruption resumes every fit from
+its last epoch checkpoint, skips finished variants and completes the same MLflow run.
+``resume=false`` discards that state.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import logging
+import shutil
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import lightning.pytorch as pl
+import numpy as np
+import torch
+from hydra.utils import instantiate
+from lightning.fabric.utilities.rank_zero import rank_zero_only
+from omegaconf import DictConfig, OmegaConf
+
+from handradar.atomic import atomic_path, atomic_write_text
+from handradar.data.provision import ArrayDataset, file_hash, import_callable, load_arrays
+from handradar.data.splits import Split, few_shot_split, make_split
+from handradar.provenance import code_version, config_hash
+from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
+from handradar.tasks.fitting import TrackerLogger, make_trainer, resumable_fit, tensor_loader
+from handradar.tasks.gan import CGANModule, sample_per_class
+from handradar.tasks.providers import load_synthetic
+from handradar.tasks.report import job_table
+from handradar.tasks.tracking import TAG_PREFIX, Tracker, _flatten
+
+log = logging.getLogger(__name__)
+
+VARIANTS = ("radar_only", "model_synth", "enhanced_synth", "cgan")
+SYNTH_MODES = {"model_synth": "model", "enhanced_synth": "enhanced"}
+HASH_IGNORED = ("paths", "logger", "resume", "state_dir", "threads", "checkpoint_interval_s", "print_table")
+
+
+def job_hash(cfg: DictConfig, data_hash: str) -> str:
+    """Hash of what determines a job's results: the config without paths, logging and caches,
+    with the real-data source replaced by the data's content hash."""
+    c = OmegaConf.to_container(cfg, resolve=True)
+    for k in HASH_IGNORED:
+        c.pop(k, None)
+    c.get("data", {}).pop("source", None)
+
+    def strip(o: Any) -> Any:
+        if isinstance(o, dict):
+            return {k: strip(v) for k, v in o.items() if k != "cache_dir"}
+        return [strip(v) for v in o] if isinstance(o, list) else o
+
+    return config_hash(strip(c), data_hash)
+
+
+def weights_hash(net: torch.nn.Module) -> str:
+    """SHA-256 (16 hex digits) of a network's parameters and buffers: equal iff bit-identical."""
+    h = hashlib.sha256()
+    for k, v in sorted(net.state_dict().items()):
+        h.update(k.encode())
+        h.update(v.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()[:16]
+
+
+def _is_rank_zero() -> bool:
+    return getattr(rank_zero_only, "rank", 0) == 0
+
+
+class Job:
+    """One train.py job; see the module docstring."""
+
+    def __init__(self, cfg: DictConfig, run_dir: Path) -> None:
+        self.cfg = cfg
+        self.run_dir = Path(run_dir)
+        self.seed = int(cfg.seed)
+        self.rank_zero = _is_rank_zero()
+        self.tracker: Tracker = Tracker("", "", enabled=False)
+        self.real: ArrayDataset
+        self.state: Path
+
+    # ---- job life cycle ---------------------------------------------------------------------
+    def run(self) -> dict[str, float]:
+        cfg = self.cfg
+        if cfg.get("threads"):
+            torch.set_num_threads(int(cfg.threads))
+        # Lightning's per-fit banners (devices, tips) would bury the job's own log.
+        logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)
+        real_path = instantiate(cfg.data.source).path()
+        self.real = load_arrays(real_path)
+        data_hash = file_hash(real_path)
+        jhash = job_hash(cfg, data_hash)
+        self.state = Path(cfg.state_dir) / jhash
+        with self._state_lock():
+            if not cfg.resume and self.rank_zero:
+                shutil.rmtree(self.state, ignore_errors=True)
+            self.state.mkdir(parents=True, exist_ok=True)
+            job_file = self.state / "job.json"
+            previous = json.loads(job_file.read_text()) if job_file.is_file() else {}
+            if self.rank_zero:
+                self.tracker = instantiate(cfg.logger) if cfg.get("logger") else self.tracker
+            tags = {f"{TAG_PREFIX}preset": cfg.task_name, f"{TAG_PREFIX}seed": self.seed,
+                    f"{TAG_PREFIX}job_hash": jhash, f"{TAG_PREFIX}data_hash": data_hash,
+                    f"{TAG_PREFIX}code_version": code_version(), f"{TAG_PREFIX}run_dir": str(self.run_dir),
+                    f"{TAG_PREFIX}data_path": str(real_path)}
+            run_id = self.tracker.start(run_id=previous.get("mlflow_run_id"), run_name=f"{cfg.task_name}-seed{self.seed}",
+                                        tags={k: str(v) for k, v in tags.items()})
+            if self.rank_zero:
+                atomic_write_text(job_file, json.dumps({"job_hash": jhash, "mlflow_run_id": run_id,
+                                                        "run_dirs": [*previous.get("run_dirs", []), str(self.run_dir)]}, indent=1))
+                resolved = OmegaConf.to_container(cfg, resolve=True)
+                self.tracker.set_tags(tags)
+                self.tracker.log_params(resolved)
+                self.tracker.log_dict(resolved, "config.yaml")
+            try:
+                results: dict[str, dict] = {}
+                if cfg.job == "variants":
+                    results = self.run_variants()
+                elif cfg.job == "external_pretrain":
+                    results = self.run_external_pretrain()
+                elif "." in str(cfg.job):  # another job kind: a function (job: Job) -> {metric: number}
+                    metrics = {k: float(v) for k, v in import_callable(str(cfg.job))(self).items()}
+                else:
+                    raise ValueError(f"job must be 'variants', 'external_pretrain' or a dotted function name, found {cfg.job!r}")
+                if results:
+                    metrics = {f"test/acc_{name}": r["acc"] for name, r in results.items()}
+                if self.rank_zero:
+                    self._write_outputs(results, metrics)
+                    self.tracker.end("FINISHED")
+            except BaseException as exc:
+                if self.rank_zero:
+                    with contextlib.suppress(Exception):
+                        self.tracker.end("KILLED" if isinstance(exc, KeyboardInterrupt) else "FAILED")
+                raise
+        return metrics
+
+    @contextlib.contextmanager
+    def _state_lock(self) -> Iterator[None]:
+        """One live job per state folder (two identical jobs would share checkpoints)."""
+        if not self.rank_zero:  # DDP ranks > 0 run inside rank 0's job
+            yield
+            return
+        import fcntl
+
+        self.state.parent.mkdir(parents=True, exist_ok=True)
+        with open(self.state.parent / f"{self.state.name}.lock", "a") as fh:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise RuntimeError(f"another job with the same config is running (state {self.state})") from None
+            try:
+                yield
+            finally:
+                fcntl.flock(fh, fcntl.LOCK_UN)
+
+    def _write_outputs(self, results: dict[str, dict], metrics: dict[str, float]) -> None:
+        from handradar.viz.confusion import plot_confusion
+
+        for name, r in results.items():
+            cm_file = self.run_dir / "confusion" / f"{name}.json"
+            atomic_write_text(cm_file, json.dumps({"classes": r["classes"], "matrix": r["confusion"]}))
+            png = plot_confusion(np.asarray(r["confusion"]), r["classes"], self.run_dir / "figures" / f"confusion_{name}.png",
+                                 title=f"{self.cfg.task_name} {name} seed {self.seed}")
+            self.tracker.log_artifact(cm_file, "confusion")
+            self.tracker.log_artifact(png, "figures")
+        self.tracker.log_params({f"result.{name}.{k}": v for name, r in results.items() for k, v in r.items()
+                                 if k.startswith("n_")})
+        self.tracker.log_metrics(metrics)
+        atomic_write_text(self.run_dir / "metrics.json", json.dumps(metrics, indent=1, sort_keys=True))
+
+    # ---- building blocks --------------------------------------------------------------------
+    def cached(self, name: str, compute: Callable[[], dict]) -> dict:
+        """A variant's result, computed once per state folder (finished variants are not retrained)."""
+        f = self.state / name / "result.json"
+        if f.is_file():
+            log.info("variant %s already finished (%s)", name, f)
+            return json.loads(f.read_text())
+        result = compute()
+        if self.rank_zero:
+            atomic_write_text(f, json.dumps(result))
+            shutil.rmtree(self.state / name / "checkpoints", ignore_errors=True)  # resuming is over
+        return result
+
+    def _callbacks(self) -> list:
+        return [instantiate(c) for c in (self.cfg.get("callbacks") or {}).values() if c is not None]
+
+    def _eval_device(self) -> str:
+        accel = str(self.cfg.trainer.get("accelerator", "cpu"))
+        return "cuda" if accel in ("gpu", "cuda", "auto") and torch.cuda.is_available() else "cpu"
+
+    def fit_classifier(self, name: str, x: np.ndarray, y: np.ndarray, num_classes: int, *,
+                       init: dict[str, torch.Tensor] | None = None, overrides: dict | None = None) -> torch.nn.Module:
+        """Train ``model.net`` on (x, y), resumably; the same initial weights for every variant of a seed."""
+        cfg = self.cfg
+        pl.seed_everything(self.seed, verbose=False)
+        net = instantiate(cfg.model.net, num_classes=num_classes)
+        if init is not None:
+            missing, unexpected = net.load_state_dict(init, strict=False)
+            if unexpected or any(not k.startswith("fc.") for k in missing):
+                raise RuntimeError(f"pre-trained weights do not fit {name}: missing {missing}, unexpected {unexpected}")
+        scheduler = instantiate(cfg.model.scheduler) if cfg.model.get("scheduler") else None
+        module = ClassifierModule(net, num_classes, instantiate(cfg.model.optimizer), scheduler, prefix=f"{name}/")
+        loader = tensor_loader(x, y, batch_size=int(cfg.data.batch_size), seed=self.seed,
+                               num_workers=int(cfg.data.num_workers))
+        ckpt_dir = self.state / name / "checkpoints"
+        trainer = make_trainer(cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
+                               callbacks=self._callbacks(), overrides=overrides,
+                               checkpoint_interval_s=float(cfg.get("checkpoint_interval_s", 0)))
+        resumable_fit(trainer, module, loader, ckpt_dir)
+        if cfg.model.get("precise_bn", True):
+            recompute_bn_stats(module.net, x, device=self._eval_device())
+        return module.net
+
+    def train_and_test(self, name: str, x: np.ndarray, y: np.ndarray, test_rows: np.ndarray, num_classes: int,
+                       classes: list[str], *, test_y: np.ndarray | None = None, **kw) -> dict:
+        net = self.fit_classifier(name, x, y, num_classes, **kw)
+        ty = self.real.y[test_rows] if test_y is None else test_y
+        acc, cm = evaluate(net, self.real.x[test_rows], ty, num_classes, device=self._eval_device())
+        log.info("%s: test accuracy %.4f on %d rows", name, acc, len(ty))
+        return {"acc": acc, "confusion": cm.tolist(), "classes": classes, "n_train": int(len(y)), "n_test": int(len(ty)),
+                "weights_hash": weights_hash(net)}
+
+    # ---- few-shot and OOD variants ----------------------------------------------------------
+    def split(self) -> Split:
+        split = make_split(OmegaConf.to_container(self.cfg.split, resolve=True), self.real.y, self.real.meta, self.seed)
+        if self.rank_zero:
+            with atomic_path(self.state / "split.npz") as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, train=split.train, pool=split.pool, test=split.test)
+            self.tracker.log_params({f"split_sizes.{k}": v for k, v in split.sizes().items()})
+        if not len(split.test):
+            raise ValueError(f"split {OmegaConf.to_container(self.cfg.split)} leaves no test rows")
+        return split
+
+    def run_variants(self) -> dict[str, dict]:
+        split = self.split()
+        real, n_classes = self.real, len(self.real.classes)
+        results = {}
+        for name in self.cfg.variants:
+            if name not in VARIANTS:
+                raise ValueError(f"unknown variant {name!r}; choose from {VARIANTS}")
+
+            def compute(name: str = name) -> dict:
+                x, y = real.x[split.train], real.y[split.train]
+                extra_x, extra_y = self.extra_data(name, split)
+                return {**self.train_and_test(name, np.concatenate([x, extra_x]), np.concatenate([y, extra_y]), split.test,
+                                              n_classes, real.classes), "n_real": int(len(y)), "n_extra": int(len(extra_y))}
+
+            results[name] = self.cached(name, compute)
+        return results
+
+    def extra_data(self, name: str, split: Split) -> tuple[np.ndarray, np.ndarray]:
+        """What a variant adds to the real training rows."""
+        real = self.real
+        if name == "radar_only":
+            return real.x[:0], real.y[:0]
+        if name in SYNTH_MODES:
+            provider = instantiate(self.cfg.synth.provider)
+            path = provider(real.path, split.pool, SYNTH_MODES[name], fit_rows=split.train, seed=self.seed,
+                            cache_dir=Path(self.cfg.synth.cache_dir))
+            syn = load_synthetic(path, real.y[split.pool], real.x.shape[1:])
+            return syn.x, syn.y
+        if name == "cgan":
+            return self.cgan_samples(split)
+        raise ValueError(f"unknown variant {name!r}")
+
+    def cgan_samples(self, split: Split) -> tuple[np.ndarray, np.ndarray]:
+        """CGAN trained on the real training rows; samples per class as many as the pool's rows
+        of that class (the synthetic variants' count) or ``cgan.samples_per_class``."""
+        f = self.state / "cgan_generator" / "samples.npz"
+        if f.is_file():
+            with np.load(f) as z:
+                return z["x"], z["y"]
+        cfg, real = self.cfg.cgan, self.real
+        x, y = real.x[split.train], real.y[split.train]
+        n_classes = len(real.classes)
+        pl.seed_everything(self.seed, verbose=False)
+        gen = instantiate(cfg.generator, num_classes=n_classes, shape=(1, *x.shape[1:]))
+        disc = instantiate(cfg.discriminator, num_classes=n_classes, shape=(1, *x.shape[1:]))
+        module = CGANModule(gen, disc, lr=float(cfg.lr), betas=tuple(cfg.betas), real_label=float(cfg.real_label),
+                            mismatch=bool(cfg.get("mismatch", True)))
+        loader = tensor_loader(x, y, batch_size=int(cfg.batch_size), seed=self.seed, drop_last=len(y) > int(cfg.batch_size))
+        ckpt_dir = self.state / "cgan_generator" / "checkpoints"
+        trainer = make_trainer(self.cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
+                               callbacks=self._callbacks(), overrides={"max_steps": int(cfg.max_steps), "max_epochs": -1},
+                               checkpoint_interval_s=float(self.cfg.get("checkpoint_interval_s", 0)))
+        resumable_fit(trainer, module, loader, ckpt_dir)
+        pool_counts = np.bincount(real.y[split.pool], minlength=n_classes)
+        per_class = cfg.get("samples_per_class")
+        counts = {int(c): int(per_class if per_class is not None else pool_counts[c]) for c in np.unique(y)}
+        gx, gy = sample_per_class(module.generator.cpu(), counts, seed=self.seed)
+        if self.rank_zero:
+            with atomic_path(f) as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, x=gx, y=gy)
+            shutil.rmtree(ckpt_dir, ignore_errors=True)
+        return gx, gy
+
+    # ---- external pre-training --------------------------------------------------------------
+    def external_source(self) -> tuple[str, Any]:
+        data = self.cfg.data
+        dhg = data.get("dhg")
+        if dhg is not None and dhg.get("root"):
+            return "dhg", dhg
+        return "sfinge3d", data.sfinge3d
+
+    def pretrained_backbone(self) -> dict[str, torch.Tensor]:
+        from handradar.models.classifiers import backbone_state
+
+        f = self.state / "pretrain" / "backbone.pt"
+        if f.is_file():
+            return torch.load(f, map_location="cpu")
+        source, source_cfg = self.external_source()
+        provider = instantiate(self.cfg.synth.external_provider)
+        ext = load_arrays(provider(source_cfg, seed=self.seed, cache_dir=Path(self.cfg.synth.cache_dir)))
+        if ext.x.shape[1:] != self.real.x.shape[1:]:
+            raise ValueError(f"external spectrograms {ext.x.shape[1:]} differ from the radar data's {self.real.x.shape[1:]}")
+        net = self.fit_classifier("pretrain", ext.x, ext.y, len(ext.classes),
+                                  overrides={"max_steps": int(self.cfg.pretrain.max_steps), "max_epochs": -1})
+        state = backbone_state(net.cpu())
+        if self.rank_zero:
+            with atomic_path(f) as tmp:
+                torch.save(state, tmp)
+            shutil.rmtree(self.state / "pretrain" / "checkpoints", ignore_errors=True)
+            self.tracker.log_params({"pretrain.source": source, "pretrain.n_rows": len(ext), "pretrain.n_classes": len(ext.classes)})
+        return state
+
+    def run_external_pretrain(self) -> dict[str, dict]:
+        real, results = self.real, {}
+        backbone = None
+        for subset in self.cfg.finetune.class_subsets:
+            names = list(real.classes) if subset is None else list(subset)
+            unknown = sorted(set(names) - set(real.classes))
+            if unknown:
+                raise ValueError(f"finetune.class_subsets names {unknown}, not classes of {real.path} ({real.classes})")
+            ids = [real.classes.index(n) for n in names]
+            rows = np.flatnonzero(np.isin(real.y, ids))
+            remap = {c: i for i, c in enumerate(ids)}
+            y_sub = np.asarray([remap[int(c)] for c in real.y[rows]], dtype=np.int64)
+            for fraction in self.cfg.finetune.fractions:
+                sub = few_shot_split(y_sub, float(fraction), seed=self.seed, test="remainder")
+                train, test = rows[sub.train], rows[sub.test]
+                for init in ("scratch", "pretrained"):
+                    name = f"{init}_{len(ids)}c_{float(fraction) * 100:g}pct"
+
+                    def compute(init: str = init, train: np.ndarray = train, test: np.ndarray = test,
+                                ytr: np.ndarray = y_sub[sub.train], yte: np.ndarray = y_sub[sub.test]) -> dict:
+                        nonlocal backbone
+                        if init == "pretrained" and backbone is None:
+                            backbone = self.pretrained_backbone()
+                        return self.train_and_test(name, real.x[train], ytr, test, len(ids), names, test_y=yte,
+                                                   init=backbone if init == "pretrained" else None)
+
+                    results[name] = self.cached(name, compute)
+        return results
+
+
+def run(cfg: DictConfig, run_dir: str | Path | None = None) -> Path:
+    """Run one job; returns its run directory (Hydra's output folder unless given)."""
+    if run_dir is None:
+        from hydra.core.hydra_config import HydraConfig
+
+        run_dir = HydraConfig.get().runtime.output_dir
+    run_dir = Path(run_dir).resolve()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        metrics = Job(cfg, run_dir).run()
+    except BaseException as exc:
+        if _is_rank_zero():
+            with contextlib.suppress(Exception):
+                atomic_write_text(run_dir / "error.txt", f"{type(exc).__name__}: {exc}\n")
+        raise
+    if _is_rank_zero() and cfg.get("print_table", True):
+        params = {k: str(v) for k, v in _flatten(OmegaConf.to_container(cfg, resolve=True)).items()}
+        print(job_table(params, metrics), flush=True)
+    return run_dir

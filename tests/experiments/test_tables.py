@@ -1,0 +1,98 @@
+"""Paper-style tables from MLflow runs (experiments/tables.py) and from one job (report.job_table)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from experiments import tables
+from handradar.tasks.report import build_tables, job_table, mean_std, stats
+from handradar.tasks.tracking import Tracker
+
+
+def test_stats_and_cells():
+    m, s, n = stats([0.5, 0.6, 0.7])
+    assert (m, n) == (pytest.approx(0.6), 3) and s == pytest.approx(0.1)
+    assert mean_std([0.5, 0.6, 0.7]) == "0.600 ± 0.100 (n=3)"
+    assert mean_std([0.25]) == "0.250" and mean_std([]) == "–"
+    assert math.isnan(stats([1.0])[1])
+
+
+def _few(fraction: float, test: str = "remainder") -> dict:
+    return {"job": "variants", "split.kind": "few_shot", "split.fraction": str(fraction), "split.test": test}
+
+
+def test_build_tables_layout():
+    records = [
+        {"params": _few(0.05), "metrics": {"test/acc_radar_only": 0.4, "test/acc_model_synth": 0.6}},
+        {"params": _few(0.05), "metrics": {"test/acc_radar_only": 0.5, "test/acc_model_synth": 0.7}},
+        {"params": _few(0.2), "metrics": {"test/acc_radar_only": 0.8}},
+        {"params": _few(0.05, "fixed"), "metrics": {"test/acc_cgan": 0.3}},
+        {"params": {"job": "variants", "split.kind": "ood", "split.ood": "hands"}, "metrics": {"test/acc_enhanced_synth": 0.55}},
+        {"params": {"job": "external_pretrain"}, "metrics": {"test/acc_scratch_10c_5pct": 0.3,
+                                                             "test/acc_pretrained_10c_5pct": 0.5,
+                                                             "test/acc_pretrained_5c_10pct": 0.9}},
+    ]
+    t2, t3, t4 = build_tables(records)
+    assert t2.sorted_rows() == ["5 %", "20 %", "5 %*"]
+    md = t2.markdown()
+    assert "| 5 % | 0.450 ± 0.071 (n=2) | 0.650 ± 0.071 (n=2) | – | – |" in md
+    assert "| 5 %* | – | – | – | 0.300 |" in md
+    assert t3.sorted_rows() == ["10 classes, 5 % (external)", "5 classes, 10 % (external)"]
+    assert "| 10 classes, 5 % (external) | 0.300 | 0.500 |" in t3.markdown()
+    assert t4.sorted_rows() == ["hands (single → double)"]
+    rows = list(csv.reader(io.StringIO(t2.csv())))
+    assert rows[0][:4] == ["row", "Radar only mean", "Radar only std", "Radar only n"]
+    assert rows[1][:4] == ["5 %", "0.4500", "0.0707", "2"]
+    # one job's table (what train.py prints)
+    assert job_table(_few(0.5), {"test/acc_radar_only": 0.9}).endswith("| 50 % | 0.900 | – | – | – |")
+
+
+def _log_run(tracker_uri: str, preset: str, params: dict, metrics: dict, job_hash: str, status: str = "FINISHED",
+             confusion: np.ndarray | None = None, tmp: Path | None = None) -> None:
+    t = Tracker(tracker_uri, preset, artifact_location=str(tmp / "artifacts"))
+    t.start(tags={"handradar.preset": preset, "handradar.job_hash": job_hash})
+    t.log_params(params)
+    t.log_metrics(metrics)
+    if confusion is not None:
+        f = tmp / f"{job_hash}-radar_only.json"
+        f.write_text(json.dumps({"classes": ["a", "b"], "matrix": confusion.tolist()}))
+        (tmp / "radar_only.json").write_text(f.read_text())
+        t.log_artifact(tmp / "radar_only.json", "confusion")
+    t.end(status)
+
+
+def test_tables_from_mlflow_runs(tmp_path: Path):
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    p = {"job": "variants", "split": {"kind": "few_shot", "fraction": 0.2, "test": "remainder"}}
+    for seed, acc in enumerate([0.5, 0.6, 0.7]):
+        _log_run(uri, "few_shot_20pct", p, {"test/acc_radar_only": acc}, f"h{seed}", confusion=np.array([[3, 1], [0, 4]]),
+                 tmp=tmp_path)
+    _log_run(uri, "few_shot_20pct", p, {"test/acc_radar_only": 0.0}, "h9", status="FAILED", tmp=tmp_path)  # ignored
+    _log_run(uri, "few_shot_20pct", p, {"test/acc_radar_only": 0.1}, "h0", tmp=tmp_path)  # a newer run of job h0
+    ood = {"job": "variants", "split": {"kind": "ood", "ood": "angle"}}
+    _log_run(uri, "ood_angle", ood, {"test/acc_model_synth": 0.42}, "o1", tmp=tmp_path)
+    _log_run(uri, "unrelated", {"x": 1}, {"test/acc_radar_only": 0.99}, "u", tmp=tmp_path)  # not a handradar preset row
+
+    out = tmp_path / "results"
+    md = tables.main(["--tracking-uri", uri, "--out", str(out)])
+    text = md.read_text()
+    # job h0 counts once, with its latest run (0.1): mean of 0.1, 0.6, 0.7
+    assert "| 20 % | 0.467 ± 0.321 (n=3) |" in text
+    assert "| angle (0° → ±30°) | – | 0.420 | – | – |" in text
+    assert "Table III" not in text
+    assert (out / "table2_few_shot.csv").is_file() and (out / "table4_ood.csv").is_file()
+    png = out / "confusion" / "few_shot_20pct_radar_only.png"
+    assert png.stat().st_size > 1000
+
+
+def test_tables_without_runs(tmp_path: Path):
+    md = tables.main(["--tracking-uri", f"sqlite:///{tmp_path}/empty.db", "--out", str(tmp_path / "r"), "--no-figures"])
+    assert "no finished train.py jobs" in md.read_text()
+    assert not (tmp_path / "empty.db").exists()  # reading never creates a store

@@ -1,0 +1,197 @@
+"""train.py jobs in process: variants, providers, resume after a crash, external pre-training, errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from handradar.errors import FormatError, HandradarError
+from handradar.tasks.train import Job, run
+from tests.tasks import fakes
+from tests.tasks.fakes import compose_train, fake_overrides
+
+VARIANT_METRICS = {"test/acc_radar_only", "test/acc_model_synth", "test/acc_enhanced_synth", "test/acc_cgan"}
+
+
+def _state(run_dir: Path, tmp: Path, preset: str) -> Path:
+    (state,) = [p for p in (tmp / "logs" / preset / "state").iterdir() if p.is_dir()]
+    return state
+
+
+def test_few_shot_job_end_to_end(fake_data: Path, tmp_path: Path):
+    fakes.CALLS.clear()
+    cfg = compose_train(["+experiment=few_shot_50pct", *fake_overrides(fake_data, tmp_path),
+                         "trainer.max_steps=30", "data.batch_size=16"])
+    run_dir = run(cfg, run_dir=tmp_path / "run")
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert set(metrics) == VARIANT_METRICS
+    assert all(0.0 <= v <= 1.0 for v in metrics.values())
+    # learning: 4 real rows per class of well separated patterns
+    assert metrics["test/acc_radar_only"] >= 0.8
+    assert metrics["test/acc_model_synth"] >= 0.8 and metrics["test/acc_enhanced_synth"] >= 0.8
+    for name in ("radar_only", "model_synth", "enhanced_synth", "cgan"):
+        cm = json.loads((run_dir / "confusion" / f"{name}.json").read_text())
+        assert np.asarray(cm["matrix"]).sum() == 40 and len(cm["classes"]) == 10
+        assert (run_dir / "figures" / f"confusion_{name}.png").stat().st_size > 1000
+    # the provider got the whole training pool, and only the few-shot rows to fit on
+    split = np.load(_state(run_dir, tmp_path, "few_shot_50pct") / "split.npz")
+    assert [c["mode"] for c in fakes.CALLS] == ["model", "enhanced"]
+    for call in fakes.CALLS:
+        assert np.array_equal(call["rows"], split["pool"]) and np.array_equal(call["fit_rows"], split["train"])
+        assert call["seed"] == 1
+    assert len(split["train"]) == 40 and len(split["test"]) == 40
+    # checkpoints of finished variants are removed; results stay
+    state = _state(run_dir, tmp_path, "few_shot_50pct")
+    assert not list(state.rglob("*.ckpt"))
+    assert (state / "radar_only" / "result.json").is_file()
+
+
+def test_fixed_protocol_synthesises_every_non_test_skeleton(fake_data: Path, tmp_path: Path):
+    fakes.CALLS.clear()
+    cfg = compose_train(["+experiment=few_shot_20pct", "split.test=fixed", "split.test_fraction=0.25",
+                         "variants=[radar_only,model_synth]", "trainer.fast_dev_run=true",
+                         *fake_overrides(fake_data, tmp_path)])
+    run(cfg, run_dir=tmp_path / "run")
+    (call,) = fakes.CALLS
+    assert len(call["rows"]) == 60 and len(call["fit_rows"]) == 20  # pool 80 - 20 test; 20 % of 8 per class
+
+
+def test_ood_hands_job(fake_data: Path, tmp_path: Path):
+    fakes.CALLS.clear()
+    cfg = compose_train(["+experiment=ood_hands", "trainer.fast_dev_run=true", *fake_overrides(fake_data, tmp_path)])
+    run_dir = run(cfg, run_dir=tmp_path / "run")
+    assert set(json.loads((run_dir / "metrics.json").read_text())) == VARIANT_METRICS
+    split = np.load(_state(run_dir, tmp_path, "ood_hands") / "split.npz")
+    labels = np.repeat(np.arange(10)[None], 8, axis=0).ravel()  # write order: rows cycle through classes
+    assert set(labels[split["train"]]) == set(range(6)) and set(labels[split["test"]]) == set(range(6, 10))
+    # the pool holds the double-hand rows that are not tested: their skeletons reach the synthetic variants
+    assert set(labels[np.setdiff1d(fakes.CALLS[0]["rows"], split["train"])]) == set(range(6, 10))
+
+
+def test_resume_after_crash_matches_uninterrupted_run(fake_data: Path, tmp_path: Path):
+    """Crash in epoch 3 of the second variant; the re-run keeps the finished first variant, resumes
+    the second from its checkpoint at the start of epoch 3, and ends bit-identical to an
+    uninterrupted run (80 rows in batches of 16: 5 steps per epoch, 24 steps in all)."""
+
+    def overrides(root: Path, marker: Path) -> list[str]:
+        return ["+experiment=few_shot_50pct", "variants=[radar_only,model_synth]", "trainer.max_steps=24",
+                "data.batch_size=16", *fake_overrides(fake_data, root, logger="mlflow"),
+                "+callbacks.crash._target_=tests.tasks.fakes.CrashOnce", "+callbacks.crash.epoch=3",
+                f"+callbacks.crash.marker={marker}", "+callbacks.crash.prefix=model_synth/",
+                f"+callbacks.crash.epoch_log={root}/epochs.log"]
+
+    clean = tmp_path / "clean"
+    clean.mkdir()
+    (clean / "marker").write_text("never crash")
+    reference = run(compose_train(overrides(clean, clean / "marker")), run_dir=clean / "run")
+
+    crash = tmp_path / "crash"
+    cfg = compose_train(overrides(crash, crash / "marker"))
+    with pytest.raises(RuntimeError, match="simulated crash"):
+        run(cfg, run_dir=crash / "run1")
+    state = _state(crash / "run1", crash, "few_shot_50pct")
+    first = state / "radar_only" / "result.json"
+    assert first.is_file() and (state / "model_synth" / "checkpoints" / "last.ckpt").is_file()
+    assert not (state / "model_synth" / "result.json").exists()
+    assert (crash / "run1" / "error.txt").read_text().startswith("RuntimeError")
+    first_mtime = first.stat().st_mtime_ns
+    (crash / "epochs.log").write_text("")
+
+    resumed = run(cfg, run_dir=crash / "run2")
+    epochs = (crash / "epochs.log").read_text().split("\n")
+    assert epochs[0] == "model_synth/ 3"  # radar_only not retrained; model_synth resumed at epoch 3
+    assert first.stat().st_mtime_ns == first_mtime
+    assert json.loads((resumed / "metrics.json").read_text()) == json.loads((reference / "metrics.json").read_text())
+    for name in ("radar_only", "model_synth"):
+        a = json.loads((_state(resumed, crash, "few_shot_50pct") / name / "result.json").read_text())
+        b = json.loads((_state(reference, clean, "few_shot_50pct") / name / "result.json").read_text())
+        assert a["weights_hash"] == b["weights_hash"] and a["confusion"] == b["confusion"]
+
+    # one MLflow run for the job, completed by the re-run
+    from mlflow import MlflowClient
+
+    client = MlflowClient(f"sqlite:///{crash}/logs/mlflow/mlflow.db")
+    (exp,) = [e for e in client.search_experiments() if e.name == "few_shot_50pct"]
+    (mrun,) = client.search_runs([exp.experiment_id])
+    assert mrun.info.status == "FINISHED"
+    assert set(VARIANT_METRICS) & set(mrun.data.metrics) == {"test/acc_radar_only", "test/acc_model_synth"}
+    assert mrun.data.tags["handradar.preset"] == "few_shot_50pct" and mrun.data.tags["handradar.code_version"]
+    ref_client = MlflowClient(f"sqlite:///{clean}/logs/mlflow/mlflow.db")
+    (ref_exp,) = [e for e in ref_client.search_experiments() if e.name == "few_shot_50pct"]
+    (ref_run,) = ref_client.search_runs([ref_exp.experiment_id])
+
+    def history(c, r):
+        return sorted({(m.step, m.value) for m in c.get_metric_history(r.info.run_id, "model_synth/train/loss")})
+
+    assert history(client, mrun) == history(ref_client, ref_run)
+    assert len(history(client, mrun)) == 4  # one per complete epoch (max_steps ends inside epoch 4)
+    arts = {a.path for a in client.list_artifacts(mrun.info.run_id)}
+    assert {"config.yaml", "confusion", "figures"} <= arts
+
+
+def test_external_pretrain_job(fake_data: Path, tmp_path: Path):
+    fakes.EXTERNAL_CALLS.clear()
+    cfg = compose_train(["+experiment=external_pretrain", *fake_overrides(fake_data, tmp_path),
+                         "pretrain.max_steps=10", "trainer.max_steps=5"])
+    run_dir = run(cfg, run_dir=tmp_path / "run")
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert set(metrics) == {f"test/acc_{init}_{c}c_{p}pct" for init in ("scratch", "pretrained") for c in (10, 5)
+                            for p in (5, 10)}
+    assert fakes.EXTERNAL_CALLS == ["sfinge3d"]  # pre-trained once, reused by the four fine-tunings
+    cm5 = json.loads((run_dir / "confusion" / "pretrained_5c_10pct.json").read_text())
+    assert cm5["classes"] == ["grasp", "finger_friction", "finger_wave", "circle", "slide"]
+    assert np.asarray(cm5["matrix"]).shape == (5, 5)
+
+
+def test_external_pretrain_uses_dhg_when_given(fake_data: Path, tmp_path: Path):
+    fakes.EXTERNAL_CALLS.clear()
+    cfg = compose_train(["+experiment=external_pretrain", *fake_overrides(fake_data, tmp_path),
+                         f"data.dhg.root={tmp_path}", "finetune.class_subsets=[null]", "finetune.fractions=[0.5]",
+                         "trainer.fast_dev_run=true"])
+    run(cfg, run_dir=tmp_path / "run")
+    assert fakes.EXTERNAL_CALLS == ["dhg"]
+
+
+def test_provider_breaking_the_contract_fails_clearly(fake_data: Path, tmp_path: Path):
+    cfg = compose_train(["+experiment=few_shot_20pct", "variants=[model_synth]", "trainer.fast_dev_run=true",
+                         *fake_overrides(fake_data, tmp_path),
+                         "synth.provider._target_=tests.tasks.fakes.wrong_label_provider"])
+    with pytest.raises(FormatError, match=r"fake_model_.*\.h5: synthetic row 0 has label"):
+        run(cfg, run_dir=tmp_path / "run")
+    assert "FormatError" in (tmp_path / "run" / "error.txt").read_text()
+    assert not (tmp_path / "run" / "metrics.json").exists()
+
+
+def test_default_world_source_explains_itself(tmp_path: Path):
+    try:
+        from handradar.world import build_world_dataset  # noqa: F401
+        pytest.skip("the reference-world generator is part of this build")
+    except ImportError:
+        pass
+    cfg = compose_train(["+experiment=few_shot_5pct", f"paths.log_dir={tmp_path}", f"paths.cache_dir={tmp_path}"])
+    with pytest.raises(HandradarError, match="reference-world generator .* not available.*data=hdf5"):
+        Job(cfg, tmp_path).run()
+
+
+def test_default_simulator_provider_explains_itself(fake_data: Path, tmp_path: Path):
+    try:
+        from handradar.sim.provider import synthesize_rows  # noqa: F401
+        pytest.skip("the simulator provider is part of this build")
+    except ImportError:
+        pass
+    overrides = [o for o in fake_overrides(fake_data, tmp_path) if not o.startswith("synth.provider")]
+    cfg = compose_train(["+experiment=few_shot_20pct", "variants=[model_synth]", "trainer.fast_dev_run=true", *overrides])
+    with pytest.raises(HandradarError, match="simulator provider .* not available.*variants="):
+        run(cfg, run_dir=tmp_path / "run")
+
+
+def test_custom_job_kind(fake_data: Path, tmp_path: Path):
+    cfg = compose_train(["job=tests.tasks.fakes.custom_job", *fake_overrides(fake_data, tmp_path)])
+    run_dir = run(cfg, run_dir=tmp_path / "run")
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["test/n_rows"] == 80.0 and 0 < metrics["test/ssim_model"] < 1
+    with pytest.raises(ValueError, match="job must be"):
+        run(compose_train(["job=nonsense", *fake_overrides(fake_data, tmp_path)]), run_dir=tmp_path / "run2")
