@@ -9,6 +9,11 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+import torch
+
+from handradar.hand.skeleton import BONE_NAMES, N_BONES
+from handradar.radar.chain import ChainConfig, remove_static_clutter, stft_power
+from handradar.sim.scatterers import N_SLOTS
 
 
 def residual_profiles(measured: np.ndarray, simulated: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -50,3 +55,47 @@ def signature_correlation(residual: np.ndarray, explained: np.ndarray) -> float:
     if a.std() == 0 or b.std() == 0:
         return 0.0
     return float(np.corrcoef(a, b)[0, 1])
+
+
+def slot_power(slot_profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
+    """Per-slot STFT power (B, slots, doppler, columns) of slot profiles (B, slots, F, L, Ch, bins),
+    through the chain's clutter removal and STFT (the steps before the dB scale)."""
+    p = remove_static_clutter(slot_profiles) if chain.clutter_removal else slot_profiles
+    return stft_power(p, chain)
+
+
+class BoneResiduals:
+    """Which reflection points carry excess or missing energy (``where.reflection_points``).
+
+    Measure, per bone: the signed mean residual (measured - simulated, spectrogram units) over the
+    pixels where the simulated spectrogram is above its floor, each pixel weighted by the bone's
+    share of the simulated power there (its slot's STFT power over the sum of all slots' powers,
+    from the per-bone decomposition Simulator.slot_profiles). Positive: the measurement holds more
+    energy where this bone reflects than the simulator gives it (missing energy); negative: the
+    simulator gives it too much (excess). Both hands of a bone are pooled; the unweighted slot
+    (palm, forearm points of the simulator) appears as ``unweighted`` when it holds energy.
+    """
+
+    def __init__(self) -> None:
+        self.num = np.zeros(N_SLOTS + 1)
+        self.den = np.zeros(N_SLOTS + 1)
+
+    def add(self, power: torch.Tensor, residual: np.ndarray, simulated: np.ndarray) -> None:
+        """power (B, 39, doppler, columns) per slot; residual, simulated (B, doppler, columns)."""
+        p = power.double()
+        share = p / p.sum(1, keepdim=True).clamp_min(1e-300)
+        shown = torch.as_tensor(np.asarray(simulated) > 0, dtype=torch.float64)[:, None]
+        r = torch.as_tensor(np.asarray(residual, dtype=np.float64))[:, None]
+        self.num += (share * shown * r).sum(dim=(0, 2, 3)).numpy()
+        self.den += (share * shown).sum(dim=(0, 2, 3)).numpy()
+
+    def result(self) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for b, name in enumerate(BONE_NAMES):
+            num = self.num[b] + self.num[N_BONES + b]
+            den = self.den[b] + self.den[N_BONES + b]
+            if den > 0:
+                out[name] = float(num / den)
+        if self.den[N_SLOTS] > 1e-9 * max(self.den.sum(), 1e-300):
+            out["unweighted"] = float(self.num[N_SLOTS] / self.den[N_SLOTS])
+        return out

@@ -32,6 +32,7 @@ Public API:
       .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
       .chirp_times (F, L, C) float64 buffer, seconds
       .context(skeleton, mask, *, times, visibility) -> SimContext (retargeted joints, ...) for effects
+      .scatterers(ctx) -> Scatterers (bones + scatterer-stage effects);  .profiles_of(scat, times) -> slot profiles
     slot 38 of the profiles holds the unweighted reflectors (palm, forearm); multipath images of a
     bone stay in that bone's slot. With the cache's float16 real view pass its ``scale``.
     skeleton: (B, T, 2, 21, 3) metres radar frame; mask (B, T, 2) bool (untracked hands reflect nothing);
@@ -56,7 +57,7 @@ from handradar.radar.config import RadarConfig
 from handradar.sim import effects as _effects  # noqa: F401  (registers the eight effects)
 from handradar.sim.effects.base import Effect, SimContext, build_effects
 from handradar.sim.interp import upsample_to_chirps
-from handradar.sim.scatterers import N_SLOTS, bone_scatterers
+from handradar.sim.scatterers import N_SLOTS, Scatterers, bone_scatterers
 from handradar.sim.synthesis import combine_slots, scatterer_profiles, window_chirp_times
 
 
@@ -139,12 +140,20 @@ class Simulator(nn.Module):
         ctx = self.context(skeleton, mask, times=times, visibility=visibility)
         return self._profiles(ctx)
 
-    def _profiles(self, ctx: SimContext) -> torch.Tensor:
+    def scatterers(self, ctx: SimContext) -> Scatterers:
+        """The reflection points of a context: one per bone, then the scatterer-stage effects."""
         scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii)
         for e in self._stage("scatterers"):
             scat = e.apply_scatterers(scat, ctx)
-        return scatterer_profiles(scat, ctx.times, self.chirp_times, self.radar, self.chain,
+        return scat
+
+    def profiles_of(self, scat: Scatterers, times: torch.Tensor) -> torch.Tensor:
+        """Per-slot range profiles (B, 39, F, L, Ch, bins) of reflection points at skeleton ``times``."""
+        return scatterer_profiles(scat, times, self.chirp_times, self.radar, self.chain,
                                   tx_power_w=self.tx_power_w, gain_tx_dbi=self.gain_tx_dbi, gain_rx_dbi=self.gain_rx_dbi)
+
+    def _profiles(self, ctx: SimContext) -> torch.Tensor:
+        return self.profiles_of(self.scatterers(ctx), ctx.times)
 
     def step_times(self, n_steps: int, times: torch.Tensor | None = None) -> torch.Tensor:
         """Radar-clock times of the skeleton steps after the skeleton-stage effects (a clock offset

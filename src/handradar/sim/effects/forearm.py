@@ -1,9 +1,17 @@
-"""forearm: the wrist and forearm that move with the hand, as a cylinder behind the wrist.
+"""forearm: the wrist and forearm that move with the hand, as a cylinder from the wrist to the elbow.
 
-Axis: from the wrist away from the fingers, along wrist - middle MCP. The cylinder of length_m
-and radius_m is cut into ``n_segments`` pieces, each one scattering centre at its midpoint with
-the finite-cylinder RCS of its own length (handradar.sim.rcs.cylinder_rcs_m2), so a long forearm
-spans range bins. Unweighted points (slot -1). Differentiable in both parameters.
+The elbow is not tracked; it is taken as fixed over the window (during a hand gesture the forearm
+pivots about the elbow, which moves far less than the hand): at the mean over the tracked steps
+of wrist + length_m * u, u the unit vector from the middle MCP to the wrist (away from the
+fingers). The cylinder from the moving wrist to that elbow, of radius_m, is cut into
+``n_segments`` pieces, each one scattering centre at its midpoint with the finite-cylinder RCS of
+its own length (handradar.sim.rcs.cylinder_rcs_m2), so a long forearm spans range bins and its
+Doppler runs from the wrist's velocity down to zero at the elbow. Unweighted points (slot -1).
+Differentiable in both parameters.
+
+(Earlier versions held the forearm rigidly along the hand's axis, so it swung with every wrist
+flexion and its points moved like the palm; the gap benchmark could not tell it from other
+reflectors near the hand, see docs/gap_benchmark.md.)
 """
 
 from __future__ import annotations
@@ -13,6 +21,16 @@ import torch
 from handradar.sim.effects.base import Effect, Param, register
 from handradar.sim.rcs import cos_angle, cylinder_rcs_m2
 from handradar.sim.scatterers import Scatterers
+
+
+def fixed_elbow(joints: torch.Tensor, mask: torch.Tensor, length_m: torch.Tensor) -> torch.Tensor:
+    """Elbow (B, T, 2, 3) fixed over the window: mean over tracked steps of wrist + length * u."""
+    wrist = joints[..., 0, :]
+    axis = wrist - joints[..., 9, :]
+    unit = axis / axis.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+    m = mask.to(wrist.dtype)[..., None]  # (B, T, 2, 1)
+    elbow = ((wrist + length_m * unit) * m).sum(1) / m.sum(1).clamp_min(1.0)  # (B, 2, 3)
+    return elbow[:, None].expand_as(wrist)
 
 
 @register
@@ -29,13 +47,12 @@ class Forearm(Effect):
 
     def apply_scatterers(self, scat, ctx):
         wrist = ctx.joints[..., 0, :]
-        axis = wrist - ctx.joints[..., 9, :]
-        unit = axis / axis.norm(dim=-1, keepdim=True).clamp_min(1e-9)  # (B, T, 2, 3)
         length = self.value("length_m").to(wrist.dtype)
-        seg = length / self.n_segments
-        k = (torch.arange(self.n_segments, device=wrist.device, dtype=wrist.dtype) + 0.5) * seg
-        pos = wrist[..., None, :] + k[:, None] * unit[..., None, :]  # (B, T, 2, S, 3)
-        rcs = cylinder_rcs_m2(cos_angle(pos, unit[..., None, :].expand_as(pos)), self.value("radius_m").to(wrist.dtype),
+        axis = fixed_elbow(ctx.joints, ctx.mask, length) - wrist  # (B, T, 2, 3) wrist -> elbow
+        k = (torch.arange(self.n_segments, device=wrist.device, dtype=wrist.dtype) + 0.5) / self.n_segments
+        pos = wrist[..., None, :] + k[:, None] * axis[..., None, :]  # (B, T, 2, S, 3)
+        seg = (axis.norm(dim=-1) / self.n_segments)[..., None]
+        rcs = cylinder_rcs_m2(cos_angle(pos, axis[..., None, :].expand_as(pos)), self.value("radius_m").to(wrist.dtype),
                               seg, ctx.radar.wavelength_m)
         b, t = wrist.shape[:2]
         n = 2 * self.n_segments

@@ -1,0 +1,75 @@
+"""Gap diagnosis wall time: 100 recordings, the default settings of conf/diagnose.yaml, 2 threads.
+
+The recordings are 100 reference-world recordings (handradar.world.write_world_recordings, the
+default world with every effect on; written once into .cache/bench_gap/recordings and kept, not
+timed) or the folder named by HANDRADAR_BENCH_GAP_RECORDINGS. Timed: what ``python diagnose.py
+data.root=DIR`` does after composing its config: ingest into a dataset file, then the diagnosis
+(visibility features, slot-profile cache, grid fit, evaluation, greedy selection, RadarWeightNet
+readout), with nothing cached beforehand; then the same without the RadarWeightNet readout. The
+phases come from the report's ``timings_s``. Target: the whole diagnosis within 10 minutes.
+
+Run: ``PYTHONPATH=$PWD/src:$PWD python -m benchmarks bench_gap``.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+from hydra.utils import instantiate
+from omegaconf import OmegaConf
+
+from benchmarks.common import Result
+from handradar.data.ingest import ingest
+from handradar.gap.app import baseline_effects, sim_builder
+from handradar.gap.data import load_dataset
+from handradar.gap.diagnosis import diagnose
+from handradar.provenance import REPO_ROOT
+
+N_RECORDINGS = 100
+
+
+def _conf(name: str):
+    return OmegaConf.load(REPO_ROOT / "conf" / f"{name}.yaml")
+
+
+def recordings() -> Path:
+    env = os.environ.get("HANDRADAR_BENCH_GAP_RECORDINGS")
+    if env:
+        return Path(env)
+    from handradar.world import write_world_recordings  # the reference world (DESIGN section 6)
+
+    out = REPO_ROOT / ".cache" / "bench_gap" / "recordings"
+    write_world_recordings(None, instantiate(_conf("radar/awr1843")), out, limit=N_RECORDINGS, progress=False)
+    return out
+
+
+def run() -> list[Result]:
+    threads = int(os.environ.get("HANDRADAR_BENCH_THREADS", "2"))
+    torch.set_num_threads(threads)
+    root = recordings()
+    chain = instantiate(_conf("chain/default"))
+    sim_cfg = OmegaConf.merge(_conf("sim/paper"), {"hand": _conf("hand/default")})
+    diag_cfg = OmegaConf.to_container(_conf("diagnose").diagnose, resolve=True)
+    out: list[Result] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        ingest(root, Path(tmp) / "data.h5", chain, progress=False)
+        t_ingest = time.perf_counter() - t0
+        data = load_dataset(Path(tmp) / "data.h5")
+        n = len(data)
+        for rwn in (True, False):
+            cfg = {**diag_cfg, "radarweightnet": rwn}
+            t0 = time.perf_counter()
+            d = diagnose(data, sim_builder(sim_cfg, data.radar, data.chain), baseline_effects(sim_cfg), cfg,
+                         cache_dir=Path(tmp) / f"cache-{rwn}", progress=False)
+            wall = time.perf_counter() - t0
+            tag = "with RadarWeightNet readout" if rwn else "without RadarWeightNet (diagnose.radarweightnet=false)"
+            phases = ", ".join(f"{k} {v:.0f} s" for k, v in d.report["timings_s"].items())
+            out.append(Result(f"gap_diagnosis_{'rwn' if rwn else 'no_rwn'}_{n}rec", wall + t_ingest, "s",
+                              f"{tag}; ingest {t_ingest:.0f} s, {phases}; cause {d.report['cause']}; "
+                              f"{threads} threads; target <= 600 s"))
+    return out

@@ -1,0 +1,153 @@
+"""``python diagnose.py data.root=DIR [sim.effects=[...]]``: the job behind the entry point.
+
+One diagnosis: the data source (``data``: recordings ingested once into a cached dataset, or the
+reference world) gives a ``handradar.dataset/1`` file; the simulator is ``sim`` (its ``effects``
+are the baseline, every other effect a candidate), built on the dataset's own radar and chain;
+the output folder receives gap_report.json (DESIGN section 8), gap_report.md and its figures;
+an MLflow run (``logger``) records the config, code version, data hash, the report's headline
+numbers and the files. With ``+experiment=gap_benchmark`` the job is the withheld-effect
+benchmark instead (handradar.gap.benchmark).
+
+Public API:
+
+    run(cfg) -> Path                       the report (or the benchmark's results markdown)
+    sim_builder(sim_cfg, radar, chain) -> SimBuilder;  baseline_effects(sim_cfg) -> {effect: params}
+    write_outputs(diagnosis, out_dir, radar, chain, source="") -> {"json", "md", figures...}
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from handradar.atomic import atomic_write_text
+from handradar.gap.data import load_dataset
+from handradar.gap.diagnosis import Diagnosis, diagnose
+from handradar.gap.engine import SimBuilder
+from handradar.gap.markdown import render
+from handradar.gap.report import write_report
+from handradar.provenance import code_version
+from handradar.radar.chain import ChainConfig
+from handradar.radar.config import RadarConfig
+
+log = logging.getLogger(__name__)
+
+
+def sim_builder(sim_cfg: DictConfig | Mapping, radar: RadarConfig, chain: ChainConfig) -> SimBuilder:
+    """Simulators of the ``sim`` config with any set of effects: build({name: params}) -> Simulator."""
+    partial = instantiate(sim_cfg)
+
+    def build(effects: Mapping[str, Mapping[str, float]]):
+        return partial(radar=radar, chain=chain, effects=list(effects),
+                       effect_params={k: dict(v) for k, v in effects.items()})
+
+    return build
+
+
+def baseline_effects(sim_cfg: DictConfig | Mapping) -> dict[str, dict[str, float]]:
+    """The baseline simulator's effects ``sim.effects`` with their ``sim.effect_params``."""
+    c = OmegaConf.to_container(sim_cfg, resolve=True) if isinstance(sim_cfg, DictConfig) else dict(sim_cfg)
+    params = c.get("effect_params") or {}
+    return {str(name): dict(params.get(name) or {}) for name in (c.get("effects") or [])}
+
+
+def write_outputs(diagnosis: Diagnosis, out_dir: str | Path, radar: RadarConfig, chain: ChainConfig,
+                  source: str = "") -> dict[str, Path]:
+    """gap_report.json (validated), figures/*.png and gap_report.md in ``out_dir``."""
+    from handradar.viz.gap import diagnosis_figures
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"json": write_report(out / "gap_report.json", diagnosis.report, n_doppler=chain.stft_len,
+                                  n_columns=chain.n_columns)}
+    figs = diagnosis_figures(diagnosis, radar, chain, out / "figures")
+    md = out / "gap_report.md"
+    atomic_write_text(md, render(diagnosis.report, figs, out, source) + "\n")
+    paths["md"] = md
+    paths.update(figs)
+    return paths
+
+
+def headline_metrics(report: dict) -> dict[str, float]:
+    """Numbers of a report for MLflow (``gap/...``)."""
+    m = {"gap/baseline_ssim": report["baseline"]["ssim"], "gap/baseline_mse": report["baseline"]["mse"],
+         "gap/after_ssim": report["after"]["ssim"], "gap/after_gap_closed": report["after"]["gap_closed"]}
+    for c in report["candidates"]:
+        m[f"gap/closed_{c['effect']}"] = c["gap_closed"]
+        m[f"gap/closed_{c['effect']}_ci_low"] = c["ci95"][0]
+    if "radarweightnet" in report:
+        m["gap/closed_radarweightnet"] = report["radarweightnet"]["gap_closed"]
+    return m
+
+
+@contextlib.contextmanager
+def tracked(cfg: DictConfig, tags: Mapping[str, object], run_name: str):
+    """An MLflow run (``logger``) around a job: config, tags; ended FINISHED or FAILED."""
+    tracker = instantiate(cfg.logger) if cfg.get("logger") else None
+    if tracker is None:
+        yield None
+        return
+    from handradar.tasks.tracking import TAG_PREFIX
+
+    tracker.start(run_name=run_name, tags={f"{TAG_PREFIX}{k}": str(v) for k, v in tags.items()})
+    resolved = OmegaConf.to_container(cfg, resolve=True)
+    tracker.log_params(resolved)
+    tracker.log_dict(resolved, "config.yaml")
+    try:
+        yield tracker
+        tracker.end("FINISHED")
+    except BaseException as exc:
+        with contextlib.suppress(Exception):
+            tracker.end("KILLED" if isinstance(exc, KeyboardInterrupt) else "FAILED")
+        raise
+
+
+def output_dir() -> Path:
+    from hydra.core.hydra_config import HydraConfig
+
+    return Path(HydraConfig.get().runtime.output_dir)
+
+
+def run(cfg: DictConfig) -> Path:
+    """The diagnose.py job (module doc); returns the path printed as its last line."""
+    import torch
+
+    if cfg.get("threads"):
+        torch.set_num_threads(int(cfg.threads))
+    bench = cfg.get("benchmark")
+    if bench is not None and bench.get("enabled", False):
+        from handradar.gap.benchmark import run_benchmark
+
+        return run_benchmark(cfg, output_dir())
+    from handradar.data.provision import file_hash
+
+    path = instantiate(cfg.data.source).path()
+    data = load_dataset(path)
+    radar, chain = data.radar, data.chain  # simulate with the data's own radar and chain
+    build = sim_builder(cfg.sim, radar, chain)
+    base = baseline_effects(cfg.sim)
+    out = output_dir()
+    tags = {"preset": cfg.task_name, "seed": cfg.diagnose.seed, "data_path": path, "data_hash": file_hash(path),
+            "code_version": code_version(), "run_dir": out}
+    with tracked(cfg, tags, f"{cfg.task_name}-seed{cfg.diagnose.seed}") as tracker:
+        diag = diagnose(data, build, base, OmegaConf.to_container(cfg.diagnose, resolve=True),
+                        cache_dir=Path(cfg.paths.cache_dir) / "gap", progress=bool(cfg.get("progress", True)))
+        paths = write_outputs(diag, out, radar, chain, str(path))
+        if tracker is not None:
+            tracker.log_metrics(headline_metrics(diag.report))
+            tracker.set_tags({"handradar.cause": diag.report["cause"]})
+            for name, p in paths.items():
+                tracker.log_artifact(p, "figures" if p.suffix == ".png" else None)
+    log.info("cause: %s; gap closed after %s: %.3f", diag.report["cause"], diag.report["after"]["effects"],
+             diag.report["after"]["gap_closed"])
+    return paths["json"]
+
+
+def _np(x):  # JSON-friendly numbers for benchmark tables
+    return float(x) if isinstance(x, (np.floating, float)) else x

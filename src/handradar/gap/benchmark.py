@@ -1,0 +1,230 @@
+"""Validation of the gap diagnosis on data whose effect was withheld (``+experiment=gap_benchmark``).
+
+Cases (``benchmark.cases``): for each of the eight effects, reference-world data with that effect
+on and the other vocabulary effects off, diagnosed by the simulator without it (``sim.effects``
+of the preset, normally none); ``nothing``: a world with no vocabulary effect (the right answer
+is "none"); ``iq_imbalance``: a world whose only effect is outside the vocabulary ("none" again).
+The world's other settings (``benchmark.world``, keys of handradar.world.WorldConfig) are shared by
+every case. Each case's dataset is built once by ``benchmark.builder`` (cached by config hash)
+and diagnosed by exactly the code diagnose.py runs on recordings; its report is kept in the run
+folder and, keyed by the case and every setting, in ``benchmark.state_dir`` so that a stopped
+benchmark resumes.
+
+Scoring is the only place that knows the truth, and it takes it from the world configuration this
+module generated (the case), never from the data the diagnosis sees.
+
+Outputs: a confusion matrix (withheld effect x attributed cause) as PNG, a markdown table of the
+top-1 attribution and gap_closed per case, written to ``benchmark.figures_dir`` and
+``benchmark.results_md`` (docs/gap_benchmark.md, included by the README), and ``benchmark.json``
+in the run folder.
+
+Public API:
+
+    Case(name, world_effects_on, truth);  cases(names) -> list[Case]
+    case_world(world_overrides, case) -> dict        (world config of one case)
+    score(results) -> dict                            (confusion matrix, top-1, mean gap_closed)
+    run_benchmark(cfg, out_dir) -> Path               (the results markdown)
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from hydra.utils import instantiate
+from omegaconf import DictConfig, OmegaConf
+
+from handradar.atomic import atomic_write_text
+from handradar.provenance import code_version, config_hash
+from handradar.sim.effects import EFFECT_NAMES
+
+log = logging.getLogger(__name__)
+
+NOTES_MARKER = "<!-- notes: text below this line is kept when the benchmark rewrites the file -->"
+CONTROL_NOTHING = "nothing"
+CONTROL_OUTSIDE = "iq_imbalance"  # the reference world's effect outside the vocabulary
+
+
+@dataclass(frozen=True)
+class Case:
+    name: str
+    on: tuple[str, ...]  # world effects switched on (vocabulary or not)
+    truth: str  # the right attribution: an effect name or "none"
+
+
+def cases(names: Sequence[str]) -> list[Case]:
+    out = []
+    for n in names:
+        if n in EFFECT_NAMES:
+            out.append(Case(n, (n,), n))
+        elif n == CONTROL_NOTHING:
+            out.append(Case(n, (), "none"))
+        elif n == CONTROL_OUTSIDE:
+            out.append(Case(n, (CONTROL_OUTSIDE,), "none"))
+        else:
+            raise ValueError(f"benchmark case {n!r}: expected one of {list(EFFECT_NAMES)}, "
+                             f"{CONTROL_NOTHING!r} or {CONTROL_OUTSIDE!r}")
+    return out
+
+
+def case_world(world: Mapping | None, case: Case) -> dict:
+    """The world config of a case: the shared settings, every vocabulary effect and the outside
+    control switched off except the case's own (the world's other details keep their settings)."""
+    w = copy.deepcopy(dict(world or {}))
+    effects = dict(w.get("effects") or {})
+    for name in (*EFFECT_NAMES, CONTROL_OUTSIDE):
+        effects[name] = {**dict(effects.get(name) or {}), "enabled": name in case.on}
+    w["effects"] = effects
+    return w
+
+
+def score(results: Sequence[Mapping]) -> dict:
+    """Confusion matrix (cases x attributions), top-1 correct count, mean gap_closed of the withheld effects."""
+    labels = [*EFFECT_NAMES, "none"]
+    rows = [r["case"] for r in results]
+    matrix = np.zeros((len(rows), len(labels)), dtype=int)
+    for i, r in enumerate(results):
+        matrix[i, labels.index(r["cause"])] = 1
+    effect_cases = [r for r in results if r["truth"] != "none"]
+    controls = [r for r in results if r["truth"] == "none"]
+    closed = [r["true_gap_closed"] for r in effect_cases if r.get("true_gap_closed") is not None]
+    return {"labels": labels, "cases": rows, "matrix": matrix.tolist(),
+            "effects_correct": sum(r["cause"] == r["truth"] for r in effect_cases), "effects_total": len(effect_cases),
+            "controls_correct": sum(r["cause"] == "none" for r in controls), "controls_total": len(controls),
+            "mean_true_gap_closed": float(np.mean(closed)) if closed else None,
+            "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
+
+
+def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
+    cands = {c["effect"]: c for c in report["candidates"]}
+    true = cands.get(case.truth)
+    top = report["candidates"][0] if report["candidates"] else None
+    return {"case": case.name, "truth": case.truth, "cause": report["cause"], "correct": report["cause"] == case.truth,
+            "top_candidate": top["effect"] if top else None, "top_gap_closed": top["gap_closed"] if top else None,
+            "top_ci95": top["ci95"] if top else None,
+            "true_gap_closed": None if true is None else true["gap_closed"],
+            "true_ci95": None if true is None else true["ci95"],
+            "true_params": None if true is None else true["params"],
+            "true_rank": None if true is None else [c["effect"] for c in report["candidates"]].index(case.truth) + 1,
+            "baseline_ssim": report["baseline"]["ssim"], "after_effects": report["after"]["effects"],
+            "after_gap_closed": report["after"]["gap_closed"], "lead_ci95": report["evidence"].get("lead_ci95"),
+            "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds}
+
+
+def _f(x, d=3, signed=True):
+    return "-" if x is None else (f"{x:+.{d}f}" if signed else f"{x:.{d}f}")
+
+
+def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, settings: Mapping) -> str:
+    lines = ["# Gap diagnosis benchmark: withheld effects", "",
+             "Each row is a reference world with one effect on (the other vocabulary effects off), diagnosed by the "
+             "paper's simulator without that effect; `nothing` and `iq_imbalance` are controls whose right answer "
+             "is `none` (no vocabulary effect / an effect outside the vocabulary). Generated by "
+             "`make gap-benchmark` (`python diagnose.py +experiment=gap_benchmark`).", "",
+             f"**Top-1 attribution: {scores['effects_correct']} of {scores['effects_total']} withheld effects; "
+             f"controls: {scores['controls_correct']} of {scores['controls_total']} say none.** "
+             f"Mean gap_closed by the withheld effect: {_f(scores['mean_true_gap_closed'])}; "
+             f"by the greedy selection: {_f(scores['mean_after_gap_closed'])}.", "",
+             "| world | truth | attributed cause | correct | gap_closed of the true effect [95 % CI] | rank | "
+             "top candidate (gap_closed) | runner-up lead CI | after: effects (gap_closed) | baseline SSIM |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        ci = r["true_ci95"]
+        true = "-" if r["true_gap_closed"] is None else f"{_f(r['true_gap_closed'])} [{_f(ci[0])}, {_f(ci[1])}]"
+        lead = "-" if not r.get("lead_ci95") else f"[{_f(r['lead_ci95'][0])}, {_f(r['lead_ci95'][1])}] vs {r['runner_up']}"
+        lines.append(f"| {r['case']} | {r['truth']} | {r['cause']} | {'yes' if r['correct'] else 'no'} | {true} | "
+                     f"{r['true_rank'] or '-'} | {r['top_candidate']} ({_f(r['top_gap_closed'])}) | {lead} | "
+                     f"{', '.join(r['after_effects']) or '-'} ({_f(r['after_gap_closed'])}) | "
+                     f"{_f(r['baseline_ssim'], signed=False)} |")
+    lines += ["", f"![confusion]({figure})", "",
+              f"Settings: {settings.get('rows')} rows per world ({settings.get('split')}), "
+              f"{settings.get('fit_rows')} calibration rows score the grid, seed {settings.get('seed')}; "
+              f"wall time {settings.get('minutes', 0):.1f} min on {settings.get('threads')} threads "
+              f"(code {settings.get('code_version')}).", ""]
+    return "\n".join(lines)
+
+
+def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
+    """Every case: build the world's dataset, diagnose it, score; write the figure, table and JSON."""
+    from hydra.utils import get_method
+
+    from handradar.gap.app import baseline_effects, headline_metrics, sim_builder, tracked, write_outputs
+    from handradar.gap.data import load_dataset
+    from handradar.gap.diagnosis import diagnose
+    from handradar.viz.gap import confusion_figure
+
+    bench = cfg.benchmark
+    out = Path(out_dir)
+    radar, chain = instantiate(cfg.radar), instantiate(cfg.chain)
+    build_world = get_method(str(bench.builder))
+    world = OmegaConf.to_container(bench.world, resolve=True) if bench.get("world") is not None else {}
+    diag_cfg = OmegaConf.to_container(cfg.diagnose, resolve=True)
+    sim_cfg = OmegaConf.to_container(cfg.sim, resolve=True)
+    state = Path(bench.state_dir)
+    results: list[dict] = []
+    t_start = time.perf_counter()
+    seed = diag_cfg.get("seed", 0)
+    tags = {"preset": cfg.task_name, "seed": seed, "code_version": code_version(), "run_dir": out}
+    with tracked(cfg, tags, f"{cfg.task_name}-seed{seed}") as tracker:
+        for case in cases(list(bench.cases)):
+            wcfg = case_world(world, case)
+            key = config_hash("gap-benchmark-case", wcfg, diag_cfg, sim_cfg, radar, chain, code_version())
+            done = state / f"{case.name}-{key}.json"
+            if done.is_file():
+                results.append(json.loads(done.read_text()))
+                log.info("case %s: resumed from %s", case.name, done)
+                continue
+            t0 = time.perf_counter()
+            path = build_world(wcfg, radar, chain, Path(cfg.paths.cache_dir) / "world")
+            data = load_dataset(path)
+            diagnosis = diagnose(data, sim_builder(cfg.sim, data.radar, data.chain), baseline_effects(cfg.sim),
+                                 diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
+                                 progress=bool(cfg.get("progress", True)))
+            write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))
+            res = _case_result(case, diagnosis.report, time.perf_counter() - t0, len(data))
+            atomic_write_text(done, json.dumps(res, indent=1) + "\n")
+            results.append(res)
+            log.info("case %s: truth %s, cause %s (%.0f s)", case.name, case.truth, res["cause"], res["seconds"])
+            if tracker is not None:
+                tracker.log_metrics({f"bench/{case.name}/{k.split('/', 1)[1]}": v
+                                     for k, v in headline_metrics(diagnosis.report).items()})
+        scores = score(results)
+        figures_dir, md_path = Path(bench.figures_dir), Path(bench.results_md)
+        fig = confusion_figure(np.asarray(scores["matrix"]), [f"{r['case']} ({r['truth']})" for r in results],
+                               scores["labels"], figures_dir / "gap_confusion.png",
+                               title=f"Gap benchmark: {scores['effects_correct']}/{scores['effects_total']} effects, "
+                                     f"{scores['controls_correct']}/{scores['controls_total']} controls")
+        import torch
+
+        n_rows = results[0]["rows"] if results else 0
+        settings = {"rows": n_rows, "split": f"calibration fraction {diag_cfg.get('calibration_fraction', 0.5)}",
+                    "fit_rows": diag_cfg.get("fit_rows") or "all", "seed": diag_cfg.get("seed", 0),
+                    "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
+                    "code_version": code_version()}
+        rel = Path(fig).resolve()
+        try:
+            rel_s = rel.relative_to(md_path.resolve().parent).as_posix()
+        except ValueError:
+            rel_s = str(rel)
+        notes = ""
+        if md_path.is_file():  # hand-written analysis below the marker survives a regeneration
+            old = md_path.read_text()
+            if NOTES_MARKER in old:
+                notes = old[old.index(NOTES_MARKER):]
+        atomic_write_text(md_path, results_markdown(results, scores, rel_s, settings) + "\n" + (notes or NOTES_MARKER + "\n"))
+        atomic_write_text(out / "benchmark.json", json.dumps({"results": results, "scores": scores,
+                                                              "settings": settings}, indent=1) + "\n")
+        if tracker is not None:
+            tracker.log_metrics({"bench/effects_correct": scores["effects_correct"],
+                                 "bench/controls_correct": scores["controls_correct"],
+                                 "bench/mean_true_gap_closed": scores["mean_true_gap_closed"] or 0.0,
+                                 "bench/wall_s": time.perf_counter() - t_start})
+            tracker.log_artifact(fig, "figures")
+            tracker.log_artifact(md_path)
+    return md_path

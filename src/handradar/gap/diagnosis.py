@@ -1,0 +1,350 @@
+"""The sim-to-real gap diagnosis: where the gap lies, which unmodelled effect causes it, how far it shrinks.
+
+Given measured rows (spectrograms + skeleton windows) and a baseline simulator (``sim.effects``):
+
+1. split the rows, seeded and stratified by gesture, into a calibration and an evaluation split;
+2. where: the signed mean residual (measured - simulated) over Doppler and time, SSIM by factor
+   (gesture, angle, hands, occlusion, subject), and per reflection point from the per-bone
+   decomposition (handradar.gap.where.BoneResiduals); all on the evaluation split;
+3. which: every effect not in the baseline is a candidate; its parameters are fitted on the
+   calibration split only (the documented grid, Effect.grid(); then optional gradient steps for
+   ``fit == "grad"``); its gap_closed on the evaluation split gets a paired-bootstrap 95 % CI,
+   and the change it makes is correlated with the baseline residual (its signature);
+   ``cause`` = the leading candidate when its CI excludes 0, its gap_closed is at least
+   ``min_gap_closed``, and the paired bootstrap of its lead over the runner-up excludes 0;
+   else "none" (the evidence: report key ``evidence``);
+4. how far: greedy forward selection from the leader, refitting the remaining significant
+   candidates on calibration given those chosen, while one still closes a significant part of the
+   remaining gap; ``after`` is the combined result on the evaluation split;
+5. optionally, how much a RadarWeightNet trained on the calibration split closes (handradar.gap.rwn).
+
+No code here reads meta.json ``truth``: the rows come from a dataset file, which has none.
+
+Public API:
+
+    DiagnosisConfig(...)        (fields below; conf/diagnose.yaml ``diagnose:``)
+    diagnose(data: GapData, build: SimBuilder, base: {effect: params}, cfg, *, cache_dir=None,
+             progress=True) -> Diagnosis (report dict + the arrays the figures need)
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from handradar.gap.data import GapData, stratified_split
+from handradar.gap.engine import SimBuilder, Variant, VariantEngine, merge
+from handradar.gap.fit import GridFit, grid_fit, refine
+from handradar.gap.report import FACTORS, FORMAT
+from handradar.gap.stats import (
+    bootstrap_difference,
+    bootstrap_gap_closed,
+    gap_closed,
+    per_example_mse,
+    per_example_ssim,
+)
+from handradar.gap.where import BoneResiduals, by_factor, residual_profiles, signature_correlation, slot_power
+from handradar.sim.effects import EFFECT_NAMES, REGISTRY
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class DiagnosisConfig:
+    """Settings of a diagnosis (``diagnose:`` in conf/diagnose.yaml)."""
+
+    seed: int = 0  # fixes the split, the fitting subsets, the bootstrap and RadarWeightNet's training
+    calibration_fraction: float = 0.5
+    candidates: list[str] | None = None  # None: every effect not in the baseline simulator
+    fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
+    refine_steps: int = 0  # gradient steps after the grid for effects with fit == "grad" (0: grid only)
+    refine_rows: int = 8  # calibration rows of each gradient step
+    refine_lr: float = 0.05  # Adam step as a fraction of each parameter's range
+    n_boot: int = 2000
+    min_gap_closed: float = 0.0  # smallest gap_closed worth naming a cause / adding an effect (practical relevance)
+    greedy_max: int = 3  # most effects the forward selection adds
+    batch_size: int = 8
+    radarweightnet: bool = True
+    rwn_epochs: int = 12
+    rwn_lr: float = 3e-3
+    rwn_batch_size: int = 8
+    rwn_hidden: int = 64
+    rwn_rows: int | None = None  # calibration rows RadarWeightNet trains on (None: all)
+    n_examples: int = 4  # before/after examples in the markdown
+
+    @classmethod
+    def from_mapping(cls, cfg: Mapping | None) -> DiagnosisConfig:
+        cfg = dict(cfg or {})
+        unknown = set(cfg) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"diagnose: unknown setting(s) {sorted(unknown)}; expected some of "
+                             f"{sorted(cls.__dataclass_fields__)}")
+        if cfg.get("candidates") is not None:
+            cfg["candidates"] = [str(c) for c in cfg["candidates"]]
+        return cls(**cfg)
+
+
+@dataclass
+class Candidate:
+    effect: str
+    params: dict[str, float]
+    fit: GridFit
+    ssim: np.ndarray  # per evaluation row
+    mse: np.ndarray
+    gap_closed: float = 0.0
+    ci95: tuple[float, float] = (0.0, 0.0)
+    signature: float = 0.0
+    spectrograms: np.ndarray | None = None  # evaluation rows
+
+    def significant(self, min_gap_closed: float) -> bool:
+        return self.ci95[0] > 0 and self.gap_closed >= min_gap_closed
+
+    def entry(self, min_gap_closed: float) -> dict:
+        return {"effect": self.effect, "params": {k: float(v) for k, v in self.params.items()},
+                "ssim": float(self.ssim.mean()), "mse": float(self.mse.mean()), "gap_closed": float(self.gap_closed),
+                "ci95": [float(self.ci95[0]), float(self.ci95[1])], "significant": self.significant(min_gap_closed),
+                "signature_correlation": float(self.signature), "fit": self.fit.as_dict()}
+
+
+@dataclass
+class Diagnosis:
+    report: dict
+    calibration: np.ndarray
+    evaluation: np.ndarray
+    measured: np.ndarray  # evaluation rows
+    baseline: np.ndarray  # evaluation rows, baseline simulator
+    candidates: dict[str, np.ndarray] = field(default_factory=dict)  # effect -> evaluation spectrograms
+    after: np.ndarray | None = None
+    rwn: np.ndarray | None = None
+    meta: dict[str, np.ndarray] = field(default_factory=dict)  # evaluation rows
+
+
+def _subset(labels: np.ndarray, idx: np.ndarray, n: int | None, seed: int) -> np.ndarray:
+    """A stratified subset of ``n`` of the rows ``idx`` (all when n is None or >= len(idx))."""
+    if n is None or n >= len(idx):
+        return idx
+    keep, _ = stratified_split(labels[idx], max(min(n / len(idx), 0.999), 1e-3), seed)
+    return idx[keep]
+
+
+def _bar(total: int, desc: str, enabled: bool):
+    return tqdm(total=total, desc=desc, unit="row", disable=not enabled, leave=False)
+
+
+class _Runner:
+    """One diagnosis: data, simulator builder, settings, and the fitting/evaluation steps."""
+
+    def __init__(self, data: GapData, build: SimBuilder, cfg: DiagnosisConfig, progress: bool) -> None:
+        self.data, self.build, self.cfg, self.progress = data, build, cfg, progress
+        self.target = torch.as_tensor(data.measured)
+
+    def scores(self, spec: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        m = self.target[idx]
+        s = torch.as_tensor(spec)
+        return per_example_ssim(m, s), per_example_mse(m, s)
+
+    def fit(self, engine: VariantEngine, names: Sequence[str], fit_idx: np.ndarray, refine_idx: np.ndarray,
+            step: str) -> dict[str, GridFit]:
+        n_variants = sum(len(REGISTRY[n].grid()) for n in names)
+        with _bar(len(fit_idx), f"{step}: fit {len(names)} candidates ({n_variants} grid points)", self.progress) as bar:
+            fits = grid_fit(engine, names, fit_idx, self.data.measured, progress=bar.update)
+        if self.cfg.refine_steps > 0:
+            grad = [n for n in names if REGISTRY[n].fit == "grad"]
+            for name in tqdm(grad, desc=f"{step}: gradient refinement", disable=not self.progress, leave=False):
+                f = fits[name]
+                values = refine(engine, name, f.best, refine_idx, self.data.measured, steps=self.cfg.refine_steps,
+                                lr=self.cfg.refine_lr)
+                if values != f.best:  # keep the refined values only if they score better on the fit rows
+                    spec = engine.spectrograms([{name: values}], fit_idx)[0]
+                    score = float(self.scores(spec, fit_idx)[0].mean())
+                    if score > f.best_score:
+                        f.best, f.best_score, f.refined = values, score, True
+        return fits
+
+    def evaluate(self, engine: VariantEngine, fits: dict[str, GridFit], ev: np.ndarray, before_ssim: np.ndarray,
+                 step: str, on_base=None) -> tuple[np.ndarray, list[Candidate]]:
+        """Base (first) and every fitted candidate on the evaluation rows; gap_closed against ``before_ssim``
+        (None: against this engine's base)."""
+        names = list(fits)
+        with _bar(len(ev), f"{step}: evaluate", self.progress) as bar:
+            specs = engine.spectrograms([{}] + [{n: fits[n].best} for n in names], ev, progress=bar.update,
+                                        on_base=on_base)
+        base_spec = specs[0]
+        before = self.scores(base_spec, ev)[0] if before_ssim is None else before_ssim
+        residual = self.data.measured[ev] - base_spec
+        res_map = residual.mean(0)
+        out = []
+        for name, spec in zip(names, specs[1:]):
+            ssim, mse = self.scores(spec, ev)
+            boot = bootstrap_gap_closed(before, ssim, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
+            change = (spec - base_spec).mean(0)
+            out.append(Candidate(name, fits[name].best, fits[name], ssim, mse, boot.estimate, boot.ci95,
+                                 signature_correlation(res_map, change), spec))
+        out.sort(key=lambda c: c.gap_closed, reverse=True)
+        return base_spec, out
+
+
+def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> dict:
+    """The rule that names a cause, with its numbers (report key ``evidence``)."""
+    ev: dict = {"rule": "cause = the leading candidate when its 95 % CI of gap_closed excludes 0, its gap_closed "
+                        f">= {cfg.min_gap_closed}, and the paired-bootstrap 95 % CI of its lead over the runner-up "
+                        "excludes 0; otherwise none",
+                "leader": None, "runner_up": None, "leader_significant": False, "lead": None, "lead_ci95": None,
+                "clearly_ahead": False}
+    if not cands:
+        return ev
+    lead = cands[0]
+    ev["leader"] = lead.effect
+    ev["leader_significant"] = lead.significant(cfg.min_gap_closed)
+    if len(cands) > 1:
+        run = cands[1]
+        diff, ci = bootstrap_difference(before, lead.ssim, run.ssim, n_boot=cfg.n_boot, seed=cfg.seed)
+        ev.update(runner_up=run.effect, lead=float(diff), lead_ci95=[float(ci[0]), float(ci[1])],
+                  clearly_ahead=bool(ci[0] > 0))
+    else:
+        ev["clearly_ahead"] = True
+    return ev
+
+
+def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConfig | Mapping | None = None, *,
+             cache_dir: str | Path | None = None, progress: bool = True) -> Diagnosis:
+    """Run the diagnosis (module doc) on ``data`` with the baseline simulator ``build(base)``."""
+    cfg = cfg if isinstance(cfg, DiagnosisConfig) else DiagnosisConfig.from_mapping(cfg)
+    base = {k: dict(v) for k, v in base.items()}
+    unknown = [n for n in (cfg.candidates or []) if n not in REGISTRY]
+    if unknown:
+        raise ValueError(f"unknown candidate effect(s) {unknown}; expected some of {sorted(REGISTRY)}")
+    order = list(EFFECT_NAMES) + sorted(set(REGISTRY) - set(EFFECT_NAMES))
+    names = [n for n in order if n not in base and (cfg.candidates is None or n in cfg.candidates)]
+    cal, ev = stratified_split(data.labels, cfg.calibration_fraction, cfg.seed)
+    if len(ev) < 20:
+        log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
+                    "(use 30 or more)", len(ev))
+    fit_idx = _subset(data.labels, cal, cfg.fit_rows, cfg.seed + 1)
+    refine_idx = _subset(data.labels, cal, cfg.refine_rows, cfg.seed + 2)
+    base_sim = build(base)
+    tmp = None
+    if cache_dir is None and cfg.radarweightnet:
+        tmp = tempfile.TemporaryDirectory(prefix="handradar-gap-")
+        cache_dir = tmp.name
+    timings: dict[str, float] = {}
+    clock = [time.perf_counter()]
+
+    def lap(name: str) -> None:
+        now = time.perf_counter()
+        timings[name] = timings.get(name, 0.0) + now - clock[0]
+        clock[0] = now
+        log.info("%s: %.1f s", name, timings[name])
+
+    try:
+        features = None
+        if "occlusion" in names or "occlusion" in base or cfg.radarweightnet:
+            from handradar.hand.features import cached_bone_features
+
+            features = cached_bone_features(data.rows.skeletons, data.rows.times, data.rows.masks,
+                                            data.radar.wavelength_m, base_sim.hand, cache_dir, progress=progress)
+            data.rows.visibility = features.visible_fraction()
+            lap("features")
+        profiles = None
+        if cfg.radarweightnet:
+            from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
+
+            vis = data.rows.visibility if "occlusion" in base else None
+            profiles = SlotProfileCache(cache_slot_profiles(base_sim, data.rows.skeletons, data.rows.masks, cache_dir,
+                                                            times=data.rows.times, visibility=vis,
+                                                            batch_size=cfg.batch_size, progress=progress))
+            lap("slot profile cache")
+        runner = _Runner(data, build, cfg, progress)
+        engine = VariantEngine(build, base, data.rows, batch_size=cfg.batch_size,
+                               base_profiles=None if profiles is None else profiles.profiles)
+
+        # ---- which (and where, in the same pass over the evaluation rows) ---------------------------------
+        bones = BoneResiduals()
+        powers: dict[int, torch.Tensor] = {}
+
+        def keep_power(rows: np.ndarray, p0: torch.Tensor) -> None:
+            pw = slot_power(p0, data.chain).float()
+            for i, r in enumerate(rows):
+                powers[int(r)] = pw[i]
+
+        fits = runner.fit(engine, names, fit_idx, refine_idx, "step 1")
+        lap("fit")
+        base_spec, cands = runner.evaluate(engine, fits, ev, None, "step 1", on_base=keep_power)
+        lap("evaluate")
+        before_ssim, before_mse = runner.scores(base_spec, ev)
+        bones.add(torch.stack([powers[int(r)] for r in ev]), data.measured[ev] - base_spec, base_spec)
+        powers.clear()
+        evidence = _evidence(before_ssim, cands, cfg)
+        cause = evidence["leader"] if evidence["leader_significant"] and evidence["clearly_ahead"] else "none"
+
+        # ---- how far: greedy forward selection -------------------------------------------------------
+        chosen: list[Candidate] = []
+        steps: list[dict] = [{"step": 1, "base": sorted(base), "candidates": [
+            {"effect": c.effect, "gap_closed_of_remaining": c.gap_closed, "ci95": list(c.ci95)} for c in cands]}]
+        pool = [c for c in cands if c.significant(cfg.min_gap_closed)]
+        current, current_ssim, current_mse, current_spec = dict(base), before_ssim, before_mse, base_spec
+        while pool and len(chosen) < cfg.greedy_max:
+            best = pool[0]
+            chosen.append(best)
+            current = merge(current, {best.effect: best.params})
+            current_ssim, current_mse, current_spec = best.ssim, best.mse, best.spectrograms
+            rest = [c.effect for c in pool[1:]]
+            if not rest or len(chosen) >= cfg.greedy_max:
+                break
+            step = f"step {len(chosen) + 1}"
+            eng = VariantEngine(build, current, data.rows, batch_size=cfg.batch_size)
+            fits_k = runner.fit(eng, rest, fit_idx, refine_idx, step)
+            _, cands_k = runner.evaluate(eng, fits_k, ev, current_ssim, step)
+            steps.append({"step": len(chosen) + 1, "base": sorted(current), "candidates": [
+                {"effect": c.effect, "params": c.params, "gap_closed_of_remaining": c.gap_closed, "ci95": list(c.ci95)}
+                for c in cands_k]})
+            pool = [c for c in cands_k if c.significant(cfg.min_gap_closed)]
+            lap("greedy selection")
+        after = {"effects": [c.effect for c in chosen], "ssim": float(current_ssim.mean()),
+                 "mse": float(current_mse.mean()), "gap_closed": float(gap_closed(before_ssim, current_ssim)),
+                 "params": {c.effect: c.params for c in chosen}}
+
+        # ---- where ----------------------------------------------------------------------------------
+        dop, tim = residual_profiles(data.measured[ev], base_spec)
+        ev_meta = {k: v[ev] for k, v in data.meta.items()}
+        where = {"doppler_profile": [float(v) for v in dop], "time_profile": [float(v) for v in tim],
+                 "by_factor": by_factor(before_ssim, ev_meta, FACTORS), "reflection_points": bones.result()}
+
+        report = {"format": FORMAT, "n_calibration": int(len(cal)), "n_evaluation": int(len(ev)),
+                  "baseline": {"ssim": float(before_ssim.mean()), "mse": float(before_mse.mean()),
+                               "effects": {k: base_sim.effect(k).values() for k in base}},
+                  "where": where,
+                  "candidates": [c.entry(cfg.min_gap_closed) for c in cands],
+                  "cause": cause,
+                  "after": after,
+                  "evidence": evidence,
+                  "selection": steps,
+                  "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
+                               "fit_rows": int(len(fit_idx)), "refine_steps": cfg.refine_steps,
+                               "n_boot": cfg.n_boot, "min_gap_closed": cfg.min_gap_closed}}
+        result = Diagnosis(report, cal, ev, data.measured[ev], base_spec,
+                           {c.effect: c.spectrograms for c in cands}, current_spec, None, ev_meta)
+
+        # ---- RadarWeightNet readout ------------------------------------------------------------------
+        if cfg.radarweightnet and features is not None and profiles is not None:
+            from handradar.gap.rwn import rwn_readout
+
+            train_idx = _subset(data.labels, cal, cfg.rwn_rows, cfg.seed + 3)
+            readout, rwn_spec = rwn_readout(data, build, base, features, profiles, train_idx, ev, before_ssim,
+                                            cands, cfg, progress=progress)
+            report["radarweightnet"] = readout
+            result.rwn = rwn_spec
+            lap("radarweightnet")
+        report["timings_s"] = {k: round(v, 2) for k, v in timings.items()}
+        return result
+    finally:
+        if tmp is not None:
+            tmp.cleanup()

@@ -1,0 +1,88 @@
+"""The withheld-effect benchmark: case worlds, scoring, and the whole run on a stand-in world."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+from omegaconf import OmegaConf
+
+from handradar.data.hdf5 import open_writer
+from handradar.gap.benchmark import case_world, cases, run_benchmark, score
+from handradar.sim.effects import EFFECT_NAMES
+from tests.gap.conftest import rows, simulate
+
+CALLS: list[dict] = []
+
+
+def test_cases_switch_one_effect_and_keep_other_settings():
+    cs = cases(["palm", "nothing", "iq_imbalance"])
+    assert [(c.name, c.truth) for c in cs] == [("palm", "palm"), ("nothing", "none"), ("iq_imbalance", "none")]
+    w = case_world({"subjects": 2, "effects": {"noise": {"snr_db": 5.0}, "dropouts": {"enabled": False}}}, cs[0])
+    assert w["subjects"] == 2 and w["effects"]["palm"]["enabled"] is True
+    assert all(w["effects"][n]["enabled"] is False for n in EFFECT_NAMES if n != "palm")
+    assert w["effects"]["noise"]["snr_db"] == 5.0 and w["effects"]["dropouts"] == {"enabled": False}
+    assert w["effects"]["iq_imbalance"]["enabled"] is False
+    assert case_world({}, cs[2])["effects"]["iq_imbalance"]["enabled"] is True
+
+
+def test_score_counts_effects_and_controls():
+    res = [{"case": "palm", "truth": "palm", "cause": "palm", "true_gap_closed": 0.3, "after_gap_closed": 0.4},
+           {"case": "noise", "truth": "noise", "cause": "none", "true_gap_closed": 0.1, "after_gap_closed": 0.2},
+           {"case": "nothing", "truth": "none", "cause": "none", "true_gap_closed": None, "after_gap_closed": 0.0}]
+    s = score(res)
+    assert (s["effects_correct"], s["effects_total"], s["controls_correct"], s["controls_total"]) == (1, 2, 1, 1)
+    assert abs(s["mean_true_gap_closed"] - 0.2) < 1e-12
+    m = np.asarray(s["matrix"])
+    assert m.sum() == 3 and m[0, s["labels"].index("palm")] == 1 and m[1, s["labels"].index("none")] == 1
+
+
+def fake_world(world_cfg, radar, chain, cache_dir):
+    """A stand-in for handradar.world.build_world_dataset: the simulator with the world's enabled
+    vocabulary effects (antenna_pattern at q = 6) makes the 'measured' spectrograms."""
+    CALLS.append(world_cfg)
+    on = [n for n, e in world_cfg["effects"].items() if e.get("enabled") and n in EFFECT_NAMES]
+    rs, labels, meta = rows(radar, chain, 8, seed=5)
+    spec = simulate(radar, chain, rs, {n: ({"q": 6.0} if n == "antenna_pattern" else {}) for n in on})
+    path = cache_dir / f"fake_{'_'.join(on) or 'none'}.h5"
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    with open_writer(path, classes=["g0", "g1", "g2", "g3"], radar=radar, chain=chain, skeleton_rate_hz=100.0,
+                     n_steps=rs.skeletons.shape[1], config_hash="fake") as w:
+        for i in range(len(rs)):
+            w.append(spec[i], int(labels[i]), rs.skeletons[i], rs.masks[i], 0.0,
+                     {"gesture": str(meta["gesture"][i]), "hands": int(meta["hands"][i]), "subject": str(meta["subject"][i])})
+    return path
+
+
+@pytest.mark.slow
+def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
+    cfg = OmegaConf.create({
+        "task_name": "gap_benchmark", "progress": False, "radar": {"_target_": "handradar.radar.config.RadarConfig.from_cfg_text",
+                                                                   "text": radar.to_cfg(), "source": "test"},
+        "chain": {"_target_": "handradar.radar.chain.ChainConfig", "n_columns": short_chain.n_columns},
+        "paths": {"cache_dir": str(tmp_path / "cache")},
+        "sim": {"_target_": "handradar.sim.simulator.Simulator", "_partial_": True, "effects": [], "effect_params": {}},
+        "diagnose": {"candidates": ["antenna_pattern", "palm"], "radarweightnet": False, "n_boot": 300, "greedy_max": 1},
+        "benchmark": {"enabled": True, "builder": "tests.gap.test_benchmark.fake_world",
+                      "cases": ["antenna_pattern", "nothing"], "world": {"subjects": 1},
+                      "state_dir": str(tmp_path / "state"), "figures_dir": str(tmp_path / "docs" / "figures"),
+                      "results_md": str(tmp_path / "docs" / "gap_benchmark.md")}})
+    CALLS.clear()
+    md = run_benchmark(cfg, tmp_path / "run")
+    assert md.is_file() and (tmp_path / "docs" / "figures" / "gap_confusion.png").is_file()
+    out = json.loads((tmp_path / "run" / "benchmark.json").read_text())
+    by = {r["case"]: r for r in out["results"]}
+    assert by["antenna_pattern"]["cause"] == "antenna_pattern" and by["nothing"]["cause"] == "none"
+    assert out["scores"]["effects_correct"] == 1 and out["scores"]["controls_correct"] == 1
+    assert "| antenna_pattern | antenna_pattern | antenna_pattern | yes |" in md.read_text()
+    assert (tmp_path / "run" / "cases" / "antenna_pattern" / "gap_report.json").is_file()
+    assert len(CALLS) == 2 and all(c["subjects"] == 1 for c in CALLS)
+    CALLS.clear()
+    md.write_text(md.read_text() + "hand-written analysis\n")
+    run_benchmark(cfg, tmp_path / "run2")  # every case resumes from the state folder: no world is built
+    assert CALLS == []
+    assert md.read_text().endswith("hand-written analysis\n")  # notes below the marker survive
+    with h5py.File(next((tmp_path / "cache" / "world").glob("fake_none.h5")), "r") as h5:
+        assert "truth" not in h5.attrs  # the diagnosed data never carry the truth
