@@ -1,11 +1,15 @@
-"""Shared fixtures: the default radar and chain, the shared data folder."""
+"""Shared fixtures: the default radar and chain (and a short one), the shared data folder, one torch
+thread per test (the suite runs one xdist worker per core; oversubscribed threads make small
+tensor ops up to 10x slower)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 
 import pytest
+import torch
 
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
@@ -30,6 +34,20 @@ def radar() -> RadarConfig:
 @pytest.fixture(scope="session")
 def chain() -> ChainConfig:
     return ChainConfig()
+
+
+@pytest.fixture(scope="session")
+def short_chain(chain: ChainConfig) -> ChainConfig:
+    """Four frames (8 columns, 0.4 s): the default radar's chain on a shorter window."""
+    return dataclasses.replace(chain, n_columns=8)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _one_torch_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
 
 
 @pytest.fixture(scope="session")

@@ -1,9 +1,8 @@
-"""Gap-diagnosis fixtures: one torch thread, a short chain, and synthetic "measured" rows made by the
+"""Gap-diagnosis fixtures: synthetic "measured" rows made by the
 simulator itself (with an effect switched on, or with a distortion outside the effect vocabulary)."""
 
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -13,20 +12,6 @@ from handradar.gap.data import GapData
 from handradar.gap.engine import RowSet
 from handradar.sim.demo import window
 from handradar.sim.simulator import Simulator
-
-
-@pytest.fixture(autouse=True)
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="session")
-def short_chain(chain):
-    """Four frames (8 columns, 0.4 s): the default radar's chain on a shorter window."""
-    return dataclasses.replace(chain, n_columns=8)
 
 
 def builder(radar, chain):

@@ -78,7 +78,8 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
     assert out["scores"]["effects_correct"] == 1 and out["scores"]["controls_correct"] == 1
     assert "| antenna_pattern | antenna_pattern | antenna_pattern | yes |" in md.read_text()
     assert (tmp_path / "run" / "cases" / "antenna_pattern" / "gap_report.json").is_file()
-    assert len(CALLS) == 2 and all(c["subjects"] == 1 for c in CALLS)
+    assert len(CALLS) == 3 and all(c["subjects"] == 1 for c in CALLS)  # 2 cases + the effect-free world once
+    assert by["nothing"]["signature_mean"] < 1e-6 < by["antenna_pattern"]["signature_mean"]
     CALLS.clear()
     md.write_text(md.read_text() + "hand-written analysis\n")
     run_benchmark(cfg, tmp_path / "run2")  # every case resumes from the state folder: no world is built

@@ -10,7 +10,7 @@ import torch
 from handradar.models.cgan import Discriminator, Generator
 from handradar.tasks.fitting import StepSeed, tensor_loader
 from handradar.tasks.gan import CGANModule, sample_per_class
-from tests.tasks.fakes import _one_torch_thread, class_pattern  # noqa: F401  (one torch thread in this module)
+from tests.tasks.fakes import class_pattern
 
 
 def test_shapes_and_range():

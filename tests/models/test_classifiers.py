@@ -10,7 +10,7 @@ from torch import nn
 
 from handradar.models.classifiers import backbone_state, replace_head, resnet18, resnet50
 from handradar.tasks.classify import evaluate, recompute_bn_stats
-from tests.tasks.fakes import _one_torch_thread, class_pattern  # noqa: F401  (one torch thread in this module)
+from tests.tasks.fakes import class_pattern
 
 
 @pytest.mark.parametrize("factory", [resnet18, resnet50])

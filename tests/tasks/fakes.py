@@ -176,17 +176,7 @@ def compose_train(overrides: list[str]):
         return compose("train", overrides=overrides)
 
 
-# ---- fixtures (imported by the conftest.py of tests/{config,experiments,models,tasks}) ----------
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    """One torch thread in the modules that use this fixture (restored after): the test machine is
-    shared, and oversubscribed OpenMP threads run ~10x slower."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
+# ---- fixtures (imported by the conftest.py of tests/{config,experiments,tasks}) ----------------------
 @pytest.fixture(scope="session")
 def fake_data(tmp_path_factory) -> Path:
     """10 gestures x 8 rows with full meta (subjects, angles, hands, occlusion) and skeletons."""

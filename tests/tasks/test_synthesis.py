@@ -4,7 +4,6 @@ handradar-synth write valid datasets."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import subprocess
 import sys
@@ -62,11 +61,6 @@ def make_measured(path: Path, radar, chain, n: int, seed: int = 0) -> Path:
                      {"gesture": ["slow", "wide"][labels[i]], "subject": f"s{i % 3}", "angle_deg": 0.0, "hands": 1,
                       "occlusion": False, "repetition": i, "recording": f"r{i}"})
     return path
-
-
-@pytest.fixture(scope="module")
-def short_chain(chain):
-    return dataclasses.replace(chain, n_columns=8)
 
 
 @pytest.fixture(scope="module")

@@ -101,6 +101,27 @@ def score(results: Sequence[Mapping]) -> dict:
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
+def radar_signature(case_path: str | Path, clean_path: str | Path) -> dict:
+    """How much the case's effect changes the measured spectrograms: 1 - SSIM between each row of the
+    case's world and the same row of the effect-free world (same seed, same gestures).
+
+    Truth-side context for the table (which withheld effects are visible in the radar data at all);
+    the diagnosis never sees it. Effects on the skeleton side (tracking_jitter, sync_offset) leave the
+    radar data unchanged and show 0 here.
+    """
+    import h5py
+    import torch
+
+    from handradar.gap.stats import per_example_ssim
+
+    with h5py.File(case_path, "r") as a, h5py.File(clean_path, "r") as b:
+        x, y = (torch.from_numpy(f["spectrograms"][()].astype(np.float32)) for f in (a, b))
+    if x.shape != y.shape:
+        raise ValueError(f"{case_path} and {clean_path}: spectrogram shapes {tuple(x.shape)} vs {tuple(y.shape)}")
+    d = 1.0 - per_example_ssim(y, x)
+    return {"signature_mean": float(np.mean(d)), "signature_median": float(np.median(d))}
+
+
 def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
     cands = {c["effect"]: c for c in report["candidates"]}
     true = cands.get(case.truth)
@@ -131,17 +152,22 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              f"controls: {scores['controls_correct']} of {scores['controls_total']} say none.** "
              f"Mean gap_closed by the withheld effect: {_f(scores['mean_true_gap_closed'])}; "
              f"by the greedy selection: {_f(scores['mean_after_gap_closed'])}.", "",
+             "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
+             "(mean / median): how visible the withheld effect is in the radar data at all.", "",
              "| world | truth | attributed cause | correct | gap_closed of the true effect [95 % CI] | rank | "
-             "top candidate (gap_closed) | runner-up lead CI | after: effects (gap_closed) | baseline SSIM |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "top candidate (gap_closed) | runner-up lead CI | after: effects (gap_closed) | baseline SSIM | "
+             "radar signature |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         ci = r["true_ci95"]
         true = "-" if r["true_gap_closed"] is None else f"{_f(r['true_gap_closed'])} [{_f(ci[0])}, {_f(ci[1])}]"
+        sig = ("-" if r.get("signature_mean") is None
+               else f"{_f(r['signature_mean'], signed=False)} / {_f(r['signature_median'], signed=False)}")
         lead = "-" if not r.get("lead_ci95") else f"[{_f(r['lead_ci95'][0])}, {_f(r['lead_ci95'][1])}] vs {r['runner_up']}"
         lines.append(f"| {r['case']} | {r['truth']} | {r['cause']} | {'yes' if r['correct'] else 'no'} | {true} | "
                      f"{r['true_rank'] or '-'} | {r['top_candidate']} ({_f(r['top_gap_closed'])}) | {lead} | "
                      f"{', '.join(r['after_effects']) or '-'} ({_f(r['after_gap_closed'])}) | "
-                     f"{_f(r['baseline_ssim'], signed=False)} |")
+                     f"{_f(r['baseline_ssim'], signed=False)} | {sig} |")
     lines += ["", f"![confusion]({figure})", "",
               f"Settings: {settings.get('rows')} rows per world ({settings.get('split')}), "
               f"{settings.get('fit_rows')} calibration rows score the grid, seed {settings.get('seed')}; "
@@ -172,6 +198,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     seed = diag_cfg.get("seed", 0)
     tags = {"preset": cfg.task_name, "seed": seed, "code_version": code_version(), "run_dir": out}
     with tracked(cfg, tags, f"{cfg.task_name}-seed{seed}") as tracker:
+        clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
         for case in cases(list(bench.cases)):
             wcfg = case_world(world, case)
             key = config_hash("gap-benchmark-case", wcfg, diag_cfg, sim_cfg, radar, chain, code_version())
@@ -182,12 +209,16 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                 continue
             t0 = time.perf_counter()
             path = build_world(wcfg, radar, chain, Path(cfg.paths.cache_dir) / "world")
+            if clean is None:
+                clean = build_world(case_world(world, Case(CONTROL_NOTHING, (), "none")), radar, chain,
+                                    Path(cfg.paths.cache_dir) / "world")
             data = load_dataset(path)
             diagnosis = diagnose(data, sim_builder(cfg.sim, data.radar, data.chain), baseline_effects(cfg.sim),
                                  diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
                                  progress=bool(cfg.get("progress", True)))
             write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))
-            res = _case_result(case, diagnosis.report, time.perf_counter() - t0, len(data))
+            res = {**_case_result(case, diagnosis.report, time.perf_counter() - t0, len(data)),
+                   **radar_signature(path, clean)}
             atomic_write_text(done, json.dumps(res, indent=1) + "\n")
             results.append(res)
             log.info("case %s: truth %s, cause %s (%.0f s)", case.name, case.truth, res["cause"], res["seconds"])
