@@ -8,8 +8,6 @@ withheld-effect benchmark instead (its last line: the results markdown).
 
 from __future__ import annotations
 
-import sys
-
 import hydra
 from omegaconf import DictConfig
 
@@ -18,20 +16,10 @@ import handradar.config  # noqa: F401  (registers the ${hr_root:} resolver used 
 
 @hydra.main(config_path="conf", config_name="diagnose", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
-
-    from handradar.errors import HandradarError
+    from handradar.cli import run_job
     from handradar.gap.app import run
 
-    try:
-        path = run(cfg)
-    except HandradarError as exc:
-        if HydraConfig.get().mode == RunMode.MULTIRUN:
-            raise
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(1)
-    print(path, flush=True)
+    run_job(run, cfg)
 
 
 if __name__ == "__main__":

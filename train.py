@@ -6,8 +6,6 @@ job's run directory (with metrics.json). Sweeps: ``python train.py -m +experimen
 
 from __future__ import annotations
 
-import sys
-
 import hydra
 from omegaconf import DictConfig
 
@@ -16,20 +14,10 @@ import handradar.config  # noqa: F401  (registers the ${hr_root:} resolver used 
 
 @hydra.main(config_path="conf", config_name="train", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
-
-    from handradar.errors import HandradarError
+    from handradar.cli import run_job
     from handradar.tasks.train import run
 
-    try:
-        run_dir = run(cfg)
-    except HandradarError as exc:
-        if HydraConfig.get().mode == RunMode.MULTIRUN:
-            raise  # recorded by the multirun report; the other jobs go on
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(1)
-    print(run_dir, flush=True)
+    run_job(run, cfg)
 
 
 if __name__ == "__main__":
