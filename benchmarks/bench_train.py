@@ -49,7 +49,7 @@ def _few_shot_job(tmp: Path) -> tuple[float, dict]:
     overrides = [o for o in fake_overrides(data, tmp) if not o.startswith(("model.net", "~model.net", "trainer.max_steps",
                                                                            "cgan.max_steps"))]
     cfg = compose_train(["+experiment=few_shot_5pct", *overrides, f"trainer.max_steps={JOB_STEPS}",
-                         f"cgan.max_steps={JOB_GAN_STEPS}"])
+                         f"cgan.max_steps={JOB_GAN_STEPS}", "trainer.enable_progress_bar=False"])
     t0 = time.perf_counter()
     run_dir = run(cfg, run_dir=tmp / "run")
     wall = time.perf_counter() - t0

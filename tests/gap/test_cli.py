@@ -12,8 +12,10 @@ from pathlib import Path
 import pytest
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
+from omegaconf import OmegaConf
 
 from handradar.config import VERSION_BASE, config_dir
+from handradar.data.provision import WorldSource
 from handradar.gap.app import baseline_effects, sim_builder
 from handradar.gap.report import validate_report
 from tests.data.writer import Scene, write_recording
@@ -34,6 +36,8 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     assert [e.name for e in sim.effects] == ["palm", "noise"] and sim.effect("noise").values() == {"snr_db": 15.0}
     assert cfg.logger.tracking_uri.startswith("sqlite:///") and cfg.logger.tracking_uri.endswith("mlflow/mlflow.db")
     b = _compose(["+experiment=gap_benchmark"])
+    OmegaConf.resolve(b)  # every interpolation resolves (the run logs the resolved config)
+    assert isinstance(instantiate(_compose(["data=world"]).data.source), WorldSource)
     assert b.benchmark.enabled and b.sim.effects == [] and not b.diagnose.radarweightnet
     assert b.benchmark.builder == "handradar.world.build_world_dataset"
     assert len(b.benchmark.cases) == 10 and {"nothing", "iq_imbalance"} <= set(b.benchmark.cases)
