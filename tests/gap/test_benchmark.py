@@ -26,6 +26,11 @@ def test_cases_switch_one_effect_and_keep_other_settings():
     assert w["effects"]["noise"]["snr_db"] == 5.0 and w["effects"]["dropouts"] == {"enabled": False}
     assert w["effects"]["iq_imbalance"]["enabled"] is False
     assert case_world({}, cs[2])["effects"]["iq_imbalance"]["enabled"] is True
+    # a case's strength applies to its own effect only
+    strong = {"palm": {"thickness_m": 0.04}, "noise": {"snr_db": -3.0}}
+    w = case_world({"effects": {"noise": {"snr_db": 5.0}}}, cs[0], strong)
+    assert w["effects"]["palm"] == {"thickness_m": 0.04, "enabled": True}
+    assert w["effects"]["noise"] == {"snr_db": 5.0, "enabled": False}
 
 
 def test_score_counts_effects_and_controls():

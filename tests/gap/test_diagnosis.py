@@ -5,10 +5,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
+from handradar.gap.data import GapData
 from handradar.gap.diagnosis import DiagnosisConfig, diagnose
+from handradar.gap.fit import effect_grid
 from handradar.gap.report import validate_report
-from tests.gap.conftest import builder, gap_data
+from handradar.sim.effects import REGISTRY, Effect
+from handradar.sim.effects.base import Param
+from handradar.sim.simulator import Simulator
+from tests.gap.conftest import builder, gap_data, rows
 
 CANDIDATES = ["antenna_pattern", "palm", "noise", "multipath"]
 
@@ -19,7 +25,7 @@ def run(radar, chain, data, **kw):
 
 
 def test_names_the_effect_and_recovers_its_parameter(radar, short_chain):
-    # the antenna's cos^q pattern at q = 6 (default 4; grid 1, 2, 4, 8): hands spread over +-35 deg
+    # the antenna's cos^q pattern at q = 6 (default 4; grid 0.5, 1, 2, 4, 8): hands spread over +-35 deg
     data = gap_data(radar, short_chain, 12, {"antenna_pattern": {"q": 6.0}})
     d = run(radar, short_chain, data, refine_steps=4)
     rep = d.report
@@ -65,3 +71,56 @@ def test_split_is_seeded_stratified_and_disjoint():
     again = stratified_split(labels, 0.5, seed=3)
     assert np.array_equal(again[0], cal) and np.array_equal(again[1], ev)
     assert not np.array_equal(stratified_split(labels, 0.5, seed=4)[0], cal)
+
+
+def test_baseline_calibration_recovers_the_rcs_exponent(radar, short_chain):
+    # "measured" = the paper's simulator with a less specular cylinder RCS (aspect exponent 0.5)
+    rs, labels, meta = rows(radar, short_chain, 12, seed=4)
+    with torch.no_grad():
+        measured = Simulator(radar, short_chain, rcs_exponent=0.5)(
+            torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks), times=torch.as_tensor(rs.times)).numpy()
+    data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
+    uncalibrated = run(radar, short_chain, data, rcs_exponents=[1.0]).report
+    assert uncalibrated["baseline"]["ssim"] < 0.99 and uncalibrated["baseline"]["calibration"]["grid"] == []
+    rep = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5, 0.25]).report
+    validate_report(rep, n_columns=short_chain.n_columns)
+    cal = rep["baseline"]["calibration"]
+    assert cal["rcs_exponent"] == 0.5
+    scores = {g["rcs_exponent"]: g["ssim"] for g in cal["grid"]}
+    assert scores[0.5] == pytest.approx(1.0, abs=1e-4) and scores[0.5] > max(scores[1.0], scores[0.25])
+    assert rep["baseline"]["ssim"] == pytest.approx(1.0, abs=1e-4)
+    assert rep["cause"] == "none"  # the calibrated baseline leaves no gap for a candidate to close
+
+
+def test_grid_overrides_replace_the_documented_values():
+    g = effect_grid("multipath", {"multipath": {"height_m": [0.1, 0.2]}})
+    n_coeff = len(REGISTRY["multipath"].params["reflection_coeff"].grid)
+    assert {p["height_m"] for p in g} == {0.1, 0.2} and len(g) == 2 * n_coeff
+    assert effect_grid("palm") == REGISTRY["palm"].grid()
+    with pytest.raises(ValueError, match="height_m"):
+        effect_grid("multipath", {"multipath": {"height_m": [0.9]}})  # outside the bounds [0, 0.5]
+    with pytest.raises(ValueError, match="unknown parameter"):
+        effect_grid("multipath", {"multipath": {"depth_m": [0.1]}})
+
+
+class _Broken(Effect):
+    """A candidate whose simulation is not finite (a bug in a user's effect module)."""
+
+    name = "broken"
+    stage = "signal"
+    order = 99
+    params = {"level": Param(1.0, 0.0, 2.0, (0.5, 1.5))}
+    fit = "grid"
+
+    def apply_signal(self, signal, radar, chain):
+        return signal * float("nan")
+
+
+def test_a_candidate_with_non_finite_spectrograms_is_left_out(radar, short_chain, monkeypatch):
+    monkeypatch.setitem(REGISTRY, "broken", _Broken)
+    data = gap_data(radar, short_chain, 12, {"antenna_pattern": {"q": 6.0}})
+    cfg = DiagnosisConfig(candidates=["antenna_pattern", "broken"], radarweightnet=False, n_boot=500)
+    rep = diagnose(data, builder(radar, short_chain), {}, cfg, progress=False).report
+    assert rep["cause"] == "antenna_pattern"
+    assert [c["effect"] for c in rep["candidates"]] == ["antenna_pattern"]
+    assert [e["effect"] for e in rep["excluded"]] == ["broken"] and "non-finite" in rep["excluded"][0]["reason"]

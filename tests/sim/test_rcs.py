@@ -65,3 +65,21 @@ def test_gradcheck():
     c0 = torch.tensor([0.0], dtype=torch.float64, requires_grad=True)
     cylinder_rcs_m2(c0, 0.009, 0.04, LAM).sum().backward()
     assert torch.isfinite(c0.grad).all()
+
+
+def test_aspect_exponent_compresses_toward_the_cap():
+    r, length = 0.009, 0.04
+    cap = 2 * math.pi * r * length**2 / LAM
+    c = torch.linspace(-0.99, 0.99, 199, dtype=torch.float64)
+    paper = cylinder_rcs_m2(c, r, length, LAM)
+    torch.testing.assert_close(cylinder_rcs_m2(c, r, length, LAM, exponent=1.0), paper)
+    half = cylinder_rcs_m2(c, r, length, LAM, exponent=0.5)
+    torch.testing.assert_close(half, torch.sqrt(paper * cap))  # cap (sigma / cap)^0.5, in closed form
+    assert bool((half >= paper).all()) and bool((half <= cap * (1 + 1e-12)).all())
+    torch.testing.assert_close(cylinder_rcs_m2(c, r, length, LAM, exponent=0.0), torch.full_like(c, cap))
+    # a zero-length bone reflects nothing at any exponent (no 0/0)
+    zero = cylinder_rcs_m2(torch.tensor([0.3, 0.0], dtype=torch.float64), r, 0.0, LAM, exponent=0.5)
+    assert torch.equal(zero, torch.zeros(2, dtype=torch.float64))
+    cc = torch.tensor([0.2, -0.5, 0.9], dtype=torch.float64, requires_grad=True)
+    rr = torch.tensor(0.009, dtype=torch.float64, requires_grad=True)
+    torch.autograd.gradcheck(lambda c, r: cylinder_rcs_m2(c, r, length, LAM, exponent=0.5), (cc, rr))

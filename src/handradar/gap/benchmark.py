@@ -5,7 +5,9 @@ on and the other vocabulary effects off, diagnosed by the simulator without it (
 of the preset, normally none); ``nothing``: a world with no vocabulary effect (the right answer
 is "none"); ``iq_imbalance``: a world whose only effect is outside the vocabulary ("none" again).
 The world's other settings (``benchmark.world``, keys of handradar.world.WorldConfig) are shared by
-every case. Each case's dataset is built once by ``benchmark.builder`` (cached by config hash)
+every case; ``benchmark.strengths`` ({effect: {param: value}}) sets the withheld effect's own
+parameters in its case (an effect must change the radar data to cause a gap at all: see the radar
+signature column). Each case's dataset is built once by ``benchmark.builder`` (cached by config hash)
 and diagnosed by exactly the code diagnose.py runs on recordings; its report is kept in the run
 folder and, keyed by the case and every setting, in ``benchmark.state_dir`` so that a stopped
 benchmark resumes.
@@ -21,7 +23,7 @@ in the run folder.
 Public API:
 
     Case(name, world_effects_on, truth);  cases(names) -> list[Case]
-    case_world(world_overrides, case) -> dict        (world config of one case)
+    case_world(world_overrides, case, strengths=None) -> dict   (world config of one case)
     score(results) -> dict                            (confusion matrix, top-1, mean gap_closed)
     run_benchmark(cfg, out_dir) -> Path               (the results markdown)
 """
@@ -73,13 +75,16 @@ def cases(names: Sequence[str]) -> list[Case]:
     return out
 
 
-def case_world(world: Mapping | None, case: Case) -> dict:
+def case_world(world: Mapping | None, case: Case, strengths: Mapping | None = None) -> dict:
     """The world config of a case: the shared settings, every vocabulary effect and the outside
-    control switched off except the case's own (the world's other details keep their settings)."""
+    control switched off except the case's own (the world's other details keep their settings);
+    ``strengths`` ({effect: {param: value}}) sets the parameters of the case's own effect."""
     w = copy.deepcopy(dict(world or {}))
     effects = dict(w.get("effects") or {})
+    strengths = dict(strengths or {})
     for name in (*EFFECT_NAMES, CONTROL_OUTSIDE):
-        effects[name] = {**dict(effects.get(name) or {}), "enabled": name in case.on}
+        own = dict(strengths.get(name) or {}) if name in case.on else {}
+        effects[name] = {**dict(effects.get(name) or {}), **own, "enabled": name in case.on}
     w["effects"] = effects
     return w
 
@@ -190,6 +195,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     radar, chain = instantiate(cfg.radar), instantiate(cfg.chain)
     build_world = get_method(str(bench.builder))
     world = OmegaConf.to_container(bench.world, resolve=True) if bench.get("world") is not None else {}
+    strengths = OmegaConf.to_container(bench.strengths, resolve=True) if bench.get("strengths") is not None else {}
     diag_cfg = OmegaConf.to_container(cfg.diagnose, resolve=True)
     sim_cfg = OmegaConf.to_container(cfg.sim, resolve=True)
     state = Path(bench.state_dir)
@@ -200,7 +206,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     with tracked(cfg, tags, f"{cfg.task_name}-seed{seed}") as tracker:
         clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
         for case in cases(list(bench.cases)):
-            wcfg = case_world(world, case)
+            wcfg = case_world(world, case, strengths)
             key = config_hash("gap-benchmark-case", wcfg, diag_cfg, sim_cfg, radar, chain, code_version())
             done = state / f"{case.name}-{key}.json"
             if done.is_file():

@@ -3,12 +3,17 @@
 Given measured rows (spectrograms + skeleton windows) and a baseline simulator (``sim.effects``):
 
 1. split the rows, seeded and stratified by gesture, into a calibration and an evaluation split;
+   calibrate the baseline: the aspect exponent of its cylinder RCS (handradar.sim.rcs; 1 = the
+   paper's formula) that fits the calibration split best (``rcs_exponents``). This generic
+   calibration comes first so that candidates are scored on the gap it leaves: without it, any
+   candidate that adds slow, broad returns (multipath images, a palm) closes part of the generic
+   "the cylinders are too specular" gap in every data set and wins where its effect is absent;
 2. where: the signed mean residual (measured - simulated) over Doppler and time, SSIM by factor
    (gesture, angle, hands, occlusion, subject), and per reflection point from the per-bone
    decomposition (handradar.gap.where.BoneResiduals); all on the evaluation split;
 3. which: every effect not in the baseline is a candidate; its parameters are fitted on the
-   calibration split only (the documented grid, Effect.grid(); then optional gradient steps for
-   ``fit == "grad"``); its gap_closed on the evaluation split gets a paired-bootstrap 95 % CI,
+   calibration split only (the documented grid, Effect.grid(), or ``grids``; then optional gradient
+   steps for ``fit == "grad"``); its gap_closed on the evaluation split gets a paired-bootstrap 95 % CI,
    and the change it makes is correlated with the baseline residual (its signature);
    ``cause`` = the leading candidate when its CI excludes 0, its gap_closed is at least
    ``min_gap_closed``, and the paired bootstrap of its lead over the runner-up excludes 0;
@@ -42,7 +47,7 @@ from tqdm.auto import tqdm
 
 from handradar.gap.data import GapData, stratified_split
 from handradar.gap.engine import SimBuilder, Variant, VariantEngine, merge
-from handradar.gap.fit import GridFit, grid_fit, refine
+from handradar.gap.fit import GridFit, calibrate_rcs_exponent, effect_grid, grid_fit, refine, with_rcs_exponent
 from handradar.gap.report import FACTORS, FORMAT
 from handradar.gap.stats import (
     bootstrap_difference,
@@ -64,6 +69,9 @@ class DiagnosisConfig:
     seed: int = 0  # fixes the split, the fitting subsets, the bootstrap and RadarWeightNet's training
     calibration_fraction: float = 0.5
     candidates: list[str] | None = None  # None: every effect not in the baseline simulator
+    rcs_exponents: list[float] | None = field(default_factory=lambda: [1.0, 0.75, 0.5, 0.25])
+    # the baseline's cylinder RCS aspect exponents tried (None or [1.0]: the paper's RCS, uncalibrated)
+    grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
     fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
     refine_steps: int = 0  # gradient steps after the grid for effects with fit == "grad" (0: grid only)
     refine_rows: int = 8  # calibration rows of each gradient step
@@ -89,6 +97,13 @@ class DiagnosisConfig:
                              f"{sorted(cls.__dataclass_fields__)}")
         if cfg.get("candidates") is not None:
             cfg["candidates"] = [str(c) for c in cfg["candidates"]]
+        if cfg.get("rcs_exponents") is not None:
+            cfg["rcs_exponents"] = [float(e) for e in cfg["rcs_exponents"]]
+            if not cfg["rcs_exponents"] or not all(0.0 <= e <= 1.0 for e in cfg["rcs_exponents"]):
+                raise ValueError(f"diagnose.rcs_exponents: values in [0, 1] expected, found {cfg['rcs_exponents']}")
+        if cfg.get("grids") is not None:
+            cfg["grids"] = {str(k): {str(p): [float(x) for x in v] for p, v in dict(g).items()}
+                            for k, g in dict(cfg["grids"]).items()}
         return cls(**cfg)
 
 
@@ -145,6 +160,7 @@ class _Runner:
     def __init__(self, data: GapData, build: SimBuilder, cfg: DiagnosisConfig, progress: bool) -> None:
         self.data, self.build, self.cfg, self.progress = data, build, cfg, progress
         self.target = torch.as_tensor(data.measured)
+        self.excluded: list[dict] = []  # candidates left out (non-finite simulations), for the report
 
     def scores(self, spec: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m = self.target[idx]
@@ -153,9 +169,9 @@ class _Runner:
 
     def fit(self, engine: VariantEngine, names: Sequence[str], fit_idx: np.ndarray, refine_idx: np.ndarray,
             step: str) -> dict[str, GridFit]:
-        n_variants = sum(len(REGISTRY[n].grid()) for n in names)
+        n_variants = sum(len(effect_grid(n, self.cfg.grids)) for n in names)
         with _bar(len(fit_idx), f"{step}: fit {len(names)} candidates ({n_variants} grid points)", self.progress) as bar:
-            fits = grid_fit(engine, names, fit_idx, self.data.measured, progress=bar.update)
+            fits = grid_fit(engine, names, fit_idx, self.data.measured, progress=bar.update, grids=self.cfg.grids)
         if self.cfg.refine_steps > 0:
             grad = [n for n in names if REGISTRY[n].fit == "grad"]
             for name in tqdm(grad, desc=f"{step}: gradient refinement", disable=not self.progress, leave=False):
@@ -183,6 +199,12 @@ class _Runner:
         res_map = residual.mean(0)
         out = []
         for name, spec in zip(names, specs[1:]):
+            if not np.all(np.isfinite(spec)):
+                log.warning("%s: candidate %s at %s gives non-finite spectrograms; left out", step, name,
+                            fits[name].best)
+                self.excluded.append({"effect": name, "params": fits[name].best, "step": step,
+                                      "reason": "non-finite spectrograms"})
+                continue
             ssim, mse = self.scores(spec, ev)
             boot = bootstrap_gap_closed(before, ssim, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
             change = (spec - base_spec).mean(0)
@@ -253,6 +275,19 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
                                             data.radar.wavelength_m, base_sim.hand, cache_dir, progress=progress)
             data.rows.visibility = features.visible_fraction()
             lap("features")
+
+        # ---- step 0: the baseline's generic calibration (module doc) ------------------------------------
+        calibration = {"rcs_exponent": 1.0, "grid": []}
+        exponents = list(cfg.rcs_exponents or [1.0])
+        if exponents != [1.0]:
+            with _bar(len(fit_idx) * len(exponents), "step 0: calibrate the RCS exponent", progress) as bar:
+                best, scores = calibrate_rcs_exponent(build, base, data.rows, fit_idx, data.measured, exponents,
+                                                      batch_size=cfg.batch_size, progress=bar.update)
+            calibration = {"rcs_exponent": best,
+                           "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(exponents, scores)]}
+            build = with_rcs_exponent(build, best)
+            base_sim = build(base)
+            lap("calibration")
         profiles = None
         if cfg.radarweightnet:
             from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
@@ -320,15 +355,18 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
 
         report = {"format": FORMAT, "n_calibration": int(len(cal)), "n_evaluation": int(len(ev)),
                   "baseline": {"ssim": float(before_ssim.mean()), "mse": float(before_mse.mean()),
-                               "effects": {k: base_sim.effect(k).values() for k in base}},
+                               "effects": {k: base_sim.effect(k).values() for k in base},
+                               "calibration": calibration},
                   "where": where,
                   "candidates": [c.entry(cfg.min_gap_closed) for c in cands],
                   "cause": cause,
                   "after": after,
                   "evidence": evidence,
+                  "excluded": runner.excluded,
                   "selection": steps,
                   "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
                                "fit_rows": int(len(fit_idx)), "refine_steps": cfg.refine_steps,
+                               "rcs_exponents": exponents, "grids": cfg.grids or {},
                                "n_boot": cfg.n_boot, "min_gap_closed": cfg.min_gap_closed}}
         result = Diagnosis(report, cal, ev, data.measured[ev], base_spec,
                            {c.effect: c.spectrograms for c in cands}, current_spec, None, ev_meta)

@@ -1,7 +1,15 @@
-"""Fitting candidate effects on the calibration rows: the documented grid, then optional gradient steps.
+"""Fitting on the calibration rows: the baseline's generic calibration, then candidate effects on
+their grids, then optional gradient steps.
 
-    grid_fit(engine, candidates, idx, measured) -> {effect: GridFit}
-        one pass over the rows scores every grid point of every candidate (mean SSIM)
+    effect_grid(name, overrides=None) -> [{param: value}]
+        the effect's documented grid (Effect.grid()), any parameter's values replaced by
+        ``overrides[name][param]`` (bounds checked)
+    calibrate_rcs_exponent(build, base, rows, idx, measured, exponents) -> (best exponent, [mean SSIM])
+        the aspect exponent of the cylinder RCS (handradar.sim.rcs) that makes the baseline simulator
+        closest to the measured rows
+    grid_fit(engine, candidates, idx, measured, grids=None) -> {effect: GridFit}
+        one pass over the rows scores every grid point of every candidate (mean SSIM; a grid point
+        whose spectrograms are not finite scores -inf)
     refine(engine, name, values, idx, measured, steps, lr) -> dict[str, float]
         Adam on the effect's parameters (step sizes a fraction ``lr`` of each parameter's range),
         projected into bounds after each step; used for effects with ``fit == "grad"``
@@ -9,13 +17,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import itertools
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 
-from handradar.gap.engine import VariantEngine, merge
+from handradar.gap.engine import RowSet, SimBuilder, VariantEngine, merge
 from handradar.gap.stats import per_example_ssim
 from handradar.models.losses import fast_ssim_loss
 from handradar.sim.effects import REGISTRY
@@ -37,12 +46,67 @@ class GridFit:
                 "best_ssim": self.best_score, "refined": self.refined}
 
 
+def effect_grid(name: str, overrides: Mapping[str, Mapping[str, Sequence[float]]] | None = None) -> list[dict[str, float]]:
+    """The fitting grid of effect ``name``: its documented grid with the values of any parameter in
+    ``overrides[name]`` replaced (e.g. a raised radar: {"multipath": {"height_m": [0.1, 0.2]}})."""
+    cls = REGISTRY[name]
+    own = dict((overrides or {}).get(name) or {})
+    unknown = set(own) - set(cls.params)
+    if unknown:
+        raise ValueError(f"diagnose.grids.{name}: unknown parameter(s) {sorted(unknown)}; expected some of "
+                         f"{sorted(cls.params)}")
+    axes = {}
+    for key, spec in cls.params.items():
+        values = [float(v) for v in own.get(key, spec.grid)]
+        bad = [v for v in values if not spec.low <= v <= spec.high]
+        if not values or bad:
+            raise ValueError(f"diagnose.grids.{name}.{key}: {values or 'no values'}; each must lie in "
+                             f"[{spec.low}, {spec.high}]")
+        axes[key] = values
+    return [dict(zip(axes, combo)) for combo in itertools.product(*axes.values())]
+
+
+def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:
+    """Mean SSIM of simulated rows against measured ones; -inf when the simulation is not finite
+    (a candidate that breaks the simulator must not win, nor make the ranking undefined)."""
+    if not np.all(np.isfinite(spec)):
+        return float("-inf")
+    return float(per_example_ssim(target, torch.as_tensor(spec)).mean())
+
+
+def calibrate_rcs_exponent(build: SimBuilder, base: Mapping, rows: RowSet, idx: np.ndarray, measured: np.ndarray,
+                           exponents: Sequence[float], *, batch_size: int = 8,
+                           progress: Callable[[int], None] | None = None) -> tuple[float, list[float]]:
+    """The cylinder RCS aspect exponent (of ``exponents``) under which the baseline simulator scores the
+    highest mean SSIM on rows ``idx``, and the score of each exponent."""
+    target = torch.as_tensor(measured[idx])
+    scores = []
+    for e in exponents:
+        engine = VariantEngine(with_rcs_exponent(build, float(e)), base, rows, batch_size=batch_size)
+        scores.append(_mean_ssim(target, engine.spectrograms([{}], idx, progress=progress)[0]))
+    return float(exponents[int(np.argmax(scores))]), scores
+
+
+def with_rcs_exponent(build: SimBuilder, exponent: float) -> SimBuilder:
+    """``build`` with every simulator's cylinder RCS aspect exponent set to ``exponent``."""
+    if exponent == 1.0:
+        return build
+
+    def calibrated(effects):
+        sim = build(effects)
+        sim.rcs_exponent = float(exponent)
+        return sim
+
+    return calibrated
+
+
 def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, measured: np.ndarray,
-             progress: Callable[[int], None] | None = None) -> dict[str, GridFit]:
+             progress: Callable[[int], None] | None = None,
+             grids: Mapping[str, Mapping[str, Sequence[float]]] | None = None) -> dict[str, GridFit]:
     """Every grid point of every candidate on rows ``idx`` in one pass; the best point per candidate."""
     variants, owners = [], []
     for name in candidates:
-        for point in REGISTRY[name].grid():
+        for point in effect_grid(name, grids):
             variants.append({name: point})
             owners.append(name)
     specs = engine.spectrograms(variants, idx, progress=progress)
@@ -51,7 +115,7 @@ def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, 
     for v, name, spec in zip(variants, owners, specs):
         f = fits[name]
         f.grid.append(dict(v[name]))
-        f.scores.append(float(per_example_ssim(target, torch.as_tensor(spec)).mean()))
+        f.scores.append(_mean_ssim(target, spec))
     for f in fits.values():
         j = int(np.argmax(f.scores))
         f.best, f.best_score = dict(f.grid[j]), f.scores[j]

@@ -15,6 +15,15 @@ def _params(p: dict) -> str:
     return ", ".join(f"{k}={v:.4g}" for k, v in p.items()) or "-"
 
 
+def _calibration(cal: dict | None) -> str:
+    """The baseline's generic calibration, as a clause of the baseline line."""
+    if not cal or not cal.get("grid"):
+        return " (the paper's cylinder RCS, not calibrated)"
+    tried = ", ".join(f"{g['rcs_exponent']:g}: {_f(g['ssim'])}" for g in cal["grid"])
+    return (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
+            f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
+
+
 def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = "") -> str:
     """Markdown of a (validated) report; ``figures`` by name as written by handradar.viz.gap."""
     rel = {k: Path(v).relative_to(out_dir).as_posix() if Path(v).is_relative_to(out_dir) else str(v)
@@ -27,7 +36,8 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
     lines += [f"- Baseline simulator effects: {effects}",
               f"- Rows: {report['n_calibration']} calibration (effect parameters are fitted here), "
               f"{report['n_evaluation']} evaluation (every number below)",
-              f"- Baseline: SSIM {_f(base['ssim'])}, MSE {_f(base['mse'], 5)}, gap = 1 - SSIM = {_f(1 - base['ssim'])}",
+              f"- Baseline: SSIM {_f(base['ssim'])}, MSE {_f(base['mse'], 5)}, gap = 1 - SSIM = {_f(1 - base['ssim'])}"
+              + _calibration(base.get("calibration")),
               f"- **Cause: {report['cause']}**",
               f"- After adding {', '.join(after['effects']) or 'nothing'}: SSIM {_f(after['ssim'])}, "
               f"gap closed {_f(after['gap_closed'], signed=True)}", ""]

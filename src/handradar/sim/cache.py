@@ -67,9 +67,11 @@ def slot_profiles_key(sim, skeletons: np.ndarray, masks: np.ndarray, times: np.n
         arrays.append(np.asarray(times, np.float64))
     if visibility is not None:
         arrays.append(np.asarray(visibility, np.float32))
+    # the paper's RCS (exponent 1) keeps the keys that caches written before the exponent existed have
+    rcs = () if sim.rcs_exponent == 1.0 else (("rcs_exponent", sim.rcs_exponent),)
     return config_hash(CACHE_FORMAT, sim.radar, sim.chain, sim.hand.key(), effects, sim.skeleton_rate_hz,
                        sim.tx_power_w, sim.gain_tx_dbi, sim.gain_rx_dbi, times is None, visibility is None,
-                       _digest(*arrays))
+                       _digest(*arrays), *rcs)
 
 
 @torch.no_grad()

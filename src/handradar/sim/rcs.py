@@ -11,6 +11,12 @@ which diverges at broadside (theta = 90 deg); there it is capped by the broadsid
 
 i.e. sigma = min(formula, cap). Only |cos theta| enters, so the sign of the axis is irrelevant.
 
+Aspect exponent e (``exponent``, 1 = the formula above): sigma_e = cap (sigma / cap)^e compresses
+the 30-40 dB between a bone seen end-on and at broadside toward the broadside value (e = 0: every
+aspect returns the cap). An ideal smooth cylinder is the most specular a finger can be; a tapered,
+jointed, skin-covered one returns more off broadside. The gap diagnosis fits e on its calibration
+split as a generic calibration of the baseline (handradar.gap.diagnosis).
+
 Flat disc (the palm effect): physical-optics disc of radius a, angle theta between the line of
 sight and the disc normal,
 
@@ -22,7 +28,7 @@ a palm is curved, so the side lobes of a flat disc are not physical, and torch h
 Public API (broadcasting tensors; metres, m^2):
 
     cos_angle(a (..., 3), b (..., 3)) -> (...) cosine of the angle between two vectors (0 for zero vectors)
-    cylinder_rcs_m2(cos_theta, radius_m, length_m, wavelength_m) -> sigma (...)
+    cylinder_rcs_m2(cos_theta, radius_m, length_m, wavelength_m, exponent=1.0) -> sigma (...)
     disc_rcs_m2(cos_theta, radius_m, wavelength_m) -> sigma (...)
 """
 
@@ -43,8 +49,9 @@ def cos_angle(a: torch.Tensor, b: torch.Tensor, eps: float = 1e-12) -> torch.Ten
 
 
 def cylinder_rcs_m2(cos_theta: torch.Tensor, radius_m: torch.Tensor | float, length_m: torch.Tensor | float,
-                    wavelength_m: float) -> torch.Tensor:
-    """Finite-cylinder RCS, min(lambda r sin / (8 pi cos^2), 2 pi r L^2 / lambda), m^2."""
+                    wavelength_m: float, exponent: float = 1.0) -> torch.Tensor:
+    """Finite-cylinder RCS, min(lambda r sin / (8 pi cos^2), 2 pi r L^2 / lambda), m^2; with an aspect
+    ``exponent`` e != 1, cap (sigma / cap)^e (module doc)."""
     cos_theta = torch.as_tensor(cos_theta)
     radius_m = torch.as_tensor(radius_m, dtype=cos_theta.dtype, device=cos_theta.device)
     length_m = torch.as_tensor(length_m, dtype=cos_theta.dtype, device=cos_theta.device)
@@ -57,7 +64,12 @@ def cylinder_rcs_m2(cos_theta: torch.Tensor, radius_m: torch.Tensor | float, len
     capped = numer >= 8.0 * math.pi * cos2 * cap
     safe_cos2 = torch.where(capped, torch.ones_like(cos2), cos2)
     formula = numer / (8.0 * math.pi * safe_cos2)
-    return torch.where(capped, cap, formula)
+    sigma = torch.where(capped, cap, formula)
+    if exponent == 1.0:
+        return sigma
+    # sigma / cap is in (0, 1] wherever the cap is positive; a zero-length bone (cap 0) stays at 0
+    safe_cap = torch.where(cap > 0, cap, torch.ones_like(cap))
+    return torch.where(cap > 0, safe_cap * (sigma / safe_cap).clamp_min(1e-30) ** exponent, torch.zeros_like(sigma))
 
 
 def disc_rcs_m2(cos_theta: torch.Tensor, radius_m: torch.Tensor | float, wavelength_m: float) -> torch.Tensor:

@@ -15,8 +15,9 @@ Amplitude (radar equation, bistatic form, sqrt of received power for unit transm
 Public API (torch, differentiable):
 
     bone_geometry(joints (..., 21, 3)) -> (midpoint (..., 19, 3), axis vector (..., 19, 3), length (..., 19))
-    bone_scatterers(joints (B, T, 2, 21, 3), mask (B, T, 2), wavelength_m, radii (19,)) -> Scatterers
-        one point per bone at its midpoint, cylinder RCS with the bone's own length
+    bone_scatterers(joints (B, T, 2, 21, 3), mask (B, T, 2), wavelength_m, radii (19,), rcs_exponent=1.0)
+        -> Scatterers: one point per bone at its midpoint, cylinder RCS with the bone's own length
+        (rcs_exponent: the aspect exponent of handradar.sim.rcs.cylinder_rcs_m2)
     radar_amplitude(rcs_m2, r_tx_m, r_rx_m, wavelength_m, tx_power_w, gain_tx_dbi, gain_rx_dbi) -> A
     Scatterers.cat(other) -> Scatterers (points appended)
 """
@@ -67,17 +68,17 @@ def bone_geometry(joints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, tor
 
 
 def bone_rcs_m2(midpoint: torch.Tensor, axis: torch.Tensor, length: torch.Tensor, radii: torch.Tensor,
-                wavelength_m: float) -> torch.Tensor:
+                wavelength_m: float, exponent: float = 1.0) -> torch.Tensor:
     """Cylinder RCS of each bone seen from the radar at the origin (line of sight = midpoint)."""
-    return cylinder_rcs_m2(cos_angle(midpoint, axis), radii, length, wavelength_m)
+    return cylinder_rcs_m2(cos_angle(midpoint, axis), radii, length, wavelength_m, exponent)
 
 
 def bone_scatterers(joints: torch.Tensor, mask: torch.Tensor, wavelength_m: float,
-                    radii: torch.Tensor) -> Scatterers:
+                    radii: torch.Tensor, rcs_exponent: float = 1.0) -> Scatterers:
     """One scattering centre per bone (bone midpoint), slots hand * 19 + bone; untracked: gain 0."""
     b, t = joints.shape[:2]
     mid, axis, length = bone_geometry(joints)  # (B, T, 2, 19, ...)
-    rcs = bone_rcs_m2(mid, axis, length, radii.to(joints.dtype), wavelength_m)
+    rcs = bone_rcs_m2(mid, axis, length, radii.to(joints.dtype), wavelength_m, rcs_exponent)
     gain = mask.to(joints.dtype)[..., None].expand(b, t, 2, N_BONES)
     pos = mid.reshape(b, t, N_SLOTS, 3)
     return Scatterers(pos, pos, rcs.reshape(b, t, N_SLOTS), gain.reshape(b, t, N_SLOTS),

@@ -21,7 +21,9 @@ Public API:
 
     Simulator(radar, chain, *, hand=HandModelConfig(), effects=(), effect_params=None,
               skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5,
-              compile_combine=False)   (True: torch.compile the weighted sum, see synthesis.combine_slots)
+              rcs_exponent=1.0, compile_combine=False)
+      rcs_exponent: aspect exponent of every cylinder's RCS (handradar.sim.rcs; 1 = the paper's)
+      compile_combine: torch.compile the weighted sum (see synthesis.combine_slots)
       .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
       .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
             network-independent: cache these (sim.cache) and train RadarWeightNet on them
@@ -81,13 +83,16 @@ class Simulator(nn.Module):
     def __init__(self, radar: RadarConfig, chain: ChainConfig, *, hand: HandModelConfig | None = None,
                  effects: list | tuple = (), effect_params: dict | None = None, skeleton_rate_hz: float = 100.0,
                  tx_power_w: float = 0.0158, gain_tx_dbi: float = 10.5, gain_rx_dbi: float = 10.5,
-                 compile_combine: bool = False) -> None:
+                 rcs_exponent: float = 1.0, compile_combine: bool = False) -> None:
         super().__init__()
         self.radar, self.chain = radar, chain
         self.hand = hand if isinstance(hand, HandModelConfig) else HandModelConfig(**dict(hand or {}))
         self.skeleton_rate_hz = float(skeleton_rate_hz)
         self.tx_power_w, self.gain_tx_dbi, self.gain_rx_dbi = float(tx_power_w), float(gain_tx_dbi), float(gain_rx_dbi)
         self.compile_combine = bool(compile_combine)
+        self.rcs_exponent = float(rcs_exponent)
+        if not 0.0 <= self.rcs_exponent <= 1.0:
+            raise ValueError(f"rcs_exponent must be in [0, 1] (1: the paper's cylinder RCS), found {rcs_exponent}")
         self.effects = nn.ModuleList(build_effects(list(effects), dict(effect_params or {})))
         self.register_buffer("chirp_times", torch.as_tensor(window_chirp_times(radar, chain), dtype=torch.float64),
                              persistent=False)
@@ -132,7 +137,7 @@ class Simulator(nn.Module):
         joints = retarget(skeleton, self.lengths.to(skeleton.dtype)) if self.hand.retarget else skeleton
         if visibility is not None:
             visibility = torch.as_tensor(visibility, dtype=skeleton.dtype, device=skeleton.device)
-        return SimContext(joints, mask, times, visibility, self.radar, self.chain, self.hand)
+        return SimContext(joints, mask, times, visibility, self.radar, self.chain, self.hand, self.rcs_exponent)
 
     def slot_profiles(self, skeleton: torch.Tensor, mask: torch.Tensor, *, times: torch.Tensor | None = None,
                       visibility: torch.Tensor | None = None) -> torch.Tensor:
@@ -142,7 +147,7 @@ class Simulator(nn.Module):
 
     def scatterers(self, ctx: SimContext) -> Scatterers:
         """The reflection points of a context: one per bone, then the scatterer-stage effects."""
-        scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii)
+        scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii, self.rcs_exponent)
         for e in self._stage("scatterers"):
             scat = e.apply_scatterers(scat, ctx)
         return scat

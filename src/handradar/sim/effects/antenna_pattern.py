@@ -24,7 +24,7 @@ class AntennaPattern(Effect):
     name = "antenna_pattern"
     stage = "scatterers"
     order = 70
-    params = {"q": Param(4.0, 0.0, 12.0, (1.0, 2.0, 4.0, 8.0), "exponent of the cos^q one-way power pattern")}
+    params = {"q": Param(4.0, 0.0, 12.0, (0.5, 1.0, 2.0, 4.0, 8.0), "exponent of the cos^q one-way power pattern")}
 
     def apply_scatterers(self, scat, ctx):
         q = self.value("q").to(scat.tx.dtype)

@@ -39,7 +39,7 @@ class SimContext:
     joints: (B, T, 2, 21, 3) metres, the skeleton the scatterers were built from (retargeted).
     mask: (B, T, 2) bool tracked hands; times: (T,) or (B, T) seconds of the skeleton steps.
     visibility: (B, T, 2, 19) visible / facing vertex fraction, or None (occlusion computes it).
-    radar, chain, and the simulator's amplitude settings (for effects that add reflectors).
+    radar, chain, the hand model and the cylinder RCS aspect exponent (for effects that add reflectors).
     """
 
     joints: torch.Tensor
@@ -49,6 +49,7 @@ class SimContext:
     radar: RadarConfig
     chain: ChainConfig
     hand: object  # handradar.hand.features.HandModelConfig
+    rcs_exponent: float = 1.0  # aspect exponent of cylinder RCS (handradar.sim.rcs), for effects that add cylinders
 
 
 class Effect(nn.Module):

@@ -38,8 +38,8 @@ class Forearm(Effect):
     name = "forearm"
     stage = "scatterers"
     order = 40
-    params = {"length_m": Param(0.15, 0.02, 0.3, (0.05, 0.1, 0.2), "forearm length seen by the radar"),
-              "radius_m": Param(0.03, 0.015, 0.05, (0.025, 0.04), "forearm radius")}
+    params = {"length_m": Param(0.15, 0.02, 0.3, (0.05, 0.1, 0.2, 0.3), "forearm length seen by the radar"),
+              "radius_m": Param(0.03, 0.015, 0.05, (0.02, 0.03, 0.04), "forearm radius")}
 
     def __init__(self, n_segments: int = 4, **values: float) -> None:
         super().__init__(**values)
@@ -53,7 +53,7 @@ class Forearm(Effect):
         pos = wrist[..., None, :] + k[:, None] * axis[..., None, :]  # (B, T, 2, S, 3)
         seg = (axis.norm(dim=-1) / self.n_segments)[..., None]
         rcs = cylinder_rcs_m2(cos_angle(pos, axis[..., None, :].expand_as(pos)), self.value("radius_m").to(wrist.dtype),
-                              seg, ctx.radar.wavelength_m)
+                              seg, ctx.radar.wavelength_m, ctx.rcs_exponent)
         b, t = wrist.shape[:2]
         n = 2 * self.n_segments
         gain = ctx.mask.to(wrist.dtype)[..., None].expand(b, t, 2, self.n_segments).reshape(b, t, n)

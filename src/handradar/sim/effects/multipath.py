@@ -12,6 +12,12 @@ together):
 The RCS of an image path is taken as the monostatic one of p (bistatic RCS is not modelled);
 the antenna_pattern effect, if selected after this one, suppresses paths arriving from below the
 board. Hand-hand double bounces are not modelled. Differentiable in both parameters.
+
+The fitting grid covers a radar lying on the table (the paper's set-up): the antenna 0.5-3 cm above
+the plane. A raised radar needs its own grid (``diagnose.grids.multipath.height_m``). Heights of
+5-15 cm put the one-bounce images one or more range bins behind the hand with a Doppler scaled
+toward zero, a generic "slower copy" that closes part of any simulator-vs-measurement gap (the gap
+benchmark found it winning in worlds with no multipath at all), so they are not tried by default.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ class Multipath(Effect):
     name = "multipath"
     stage = "scatterers"
     order = 60
-    params = {"height_m": Param(0.05, 0.0, 0.5, (0.01, 0.05, 0.15), "radar height above the table plane"),
+    params = {"height_m": Param(0.02, 0.0, 0.5, (0.005, 0.01, 0.02, 0.03), "radar height above the table plane"),
               "reflection_coeff": Param(0.3, 0.0, 1.0, (0.2, 0.5), "table amplitude reflection coefficient")}
 
     def apply_scatterers(self, scat, ctx):

@@ -23,7 +23,7 @@ class Noise(Effect):
     stage = "signal"
     order = 80
     fit = "grid"
-    params = {"snr_db": Param(20.0, -20.0, 60.0, (0.0, 10.0, 20.0, 30.0), "signal-to-noise ratio per range bin, dB")}
+    params = {"snr_db": Param(20.0, -20.0, 60.0, (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0), "signal-to-noise ratio per range bin, dB")}
 
     def __init__(self, seed: int = 0, **values: float) -> None:
         super().__init__(**values)

@@ -35,7 +35,7 @@ class Occlusion(Effect):
     name = "occlusion"
     stage = "scatterers"
     order = 50
-    params = {"transmission": Param(0.0, 0.0, 1.0, (0.0, 0.1, 0.3),
+    params = {"transmission": Param(0.0, 0.0, 1.0, (0.0, 0.1, 0.3, 0.6),
                                     "fraction of its power a fully hidden bone still returns")}
 
     def apply_scatterers(self, scat, ctx):

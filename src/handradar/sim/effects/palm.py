@@ -31,7 +31,7 @@ class Palm(Effect):
     name = "palm"
     stage = "scatterers"
     order = 30
-    params = {"radius_m": Param(0.02, 0.005, 0.06, (0.01, 0.02, 0.04), "effective flat radius of the palm disc")}
+    params = {"radius_m": Param(0.02, 0.003, 0.06, (0.005, 0.0075, 0.01, 0.02, 0.04), "effective flat radius of the palm disc")}
 
     def apply_scatterers(self, scat, ctx):
         centre, normal = palm_frame(ctx.joints)  # (B, T, 2, 3)
