@@ -251,6 +251,28 @@ def test_noise_has_the_requested_snr_and_raises_the_floor(radar, short_chain):
     assert medians[0] < medians[1] < medians[2]
 
 
+def test_noise_draws_average_to_the_expected_floor(radar, short_chain):
+    times = steps(radar, short_chain)
+    sk, mk = batch(*hand_window(times))
+
+    def floor(draws: int, seed: int) -> torch.Tensor:
+        sim = Simulator(radar, short_chain, effects=["noise"], effect_params={"noise": {"snr_db": 0.0}})
+        sim.effect("noise").draws, sim.effect("noise").seed = draws, seed
+        sim.effect("noise").reset_rng()
+        with torch.no_grad():
+            spec = sim.spectrogram(sim.combine(sim.slot_profiles(sk, mk)))[0]
+        return spec[: short_chain.stft_len // 4]  # far from zero Doppler: noise only
+
+    one, many = floor(1, 0), floor(16, 0)
+    # the same level (the mean power of one draw is the expected power) ...
+    assert float(many.mean()) == pytest.approx(float(one.mean()), abs=0.05)
+    # ... without one draw's speckle: the floor of 16 averaged draws varies ~4x less pixel to pixel
+    assert float(many.std()) < 0.5 * float(one.std())
+    assert not torch.equal(floor(16, 1), many)  # still random draws (seeded)
+    with pytest.raises(ValueError, match="draws"):
+        REGISTRY["noise"](draws=0)
+
+
 # ---- sync offset ---------------------------------------------------------------------------------
 def test_sync_offset_moves_the_motion_onset(radar, short_chain):
     times = steps(radar, short_chain)

@@ -47,7 +47,7 @@ from tqdm.auto import tqdm
 
 from handradar.gap.data import GapData, stratified_split
 from handradar.gap.engine import SimBuilder, Variant, VariantEngine, merge
-from handradar.gap.fit import GridFit, calibrate_rcs_exponent, effect_grid, grid_fit, refine, with_rcs_exponent
+from handradar.gap.fit import GridFit, calibrate_rcs_exponent, effect_grid, grid_fit, refine, with_settings
 from handradar.gap.report import FACTORS, FORMAT
 from handradar.gap.stats import (
     bootstrap_difference,
@@ -72,6 +72,7 @@ class DiagnosisConfig:
     rcs_exponents: list[float] | None = field(default_factory=lambda: [1.0, 0.75, 0.5, 0.25])
     # the baseline's cylinder RCS aspect exponents tried (None or [1.0]: the paper's RCS, uncalibrated)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
+    noise_draws: int = 4  # a noise effect's draws averaged in power: compare with its expected spectrogram
     fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
     refine_steps: int = 0  # gradient steps after the grid for effects with fit == "grad" (0: grid only)
     refine_rows: int = 8  # calibration rows of each gradient step
@@ -250,6 +251,9 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
     if len(ev) < 20:
         log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
                     "(use 30 or more)", len(ev))
+    if cfg.noise_draws < 1:
+        raise ValueError(f"diagnose.noise_draws must be >= 1, found {cfg.noise_draws}")
+    build = with_settings(build, noise_draws=cfg.noise_draws)
     fit_idx = _subset(data.labels, cal, cfg.fit_rows, cfg.seed + 1)
     refine_idx = _subset(data.labels, cal, cfg.refine_rows, cfg.seed + 2)
     base_sim = build(base)
@@ -285,7 +289,7 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
                                                       batch_size=cfg.batch_size, progress=bar.update)
             calibration = {"rcs_exponent": best,
                            "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(exponents, scores)]}
-            build = with_rcs_exponent(build, best)
+            build = with_settings(build, rcs_exponent=best)
             base_sim = build(base)
             lap("calibration")
         profiles = None

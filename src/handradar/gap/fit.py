@@ -7,6 +7,7 @@ their grids, then optional gradient steps.
     calibrate_rcs_exponent(build, base, rows, idx, measured, exponents) -> (best exponent, [mean SSIM])
         the aspect exponent of the cylinder RCS (handradar.sim.rcs) that makes the baseline simulator
         closest to the measured rows
+    with_settings(build, rcs_exponent=None, noise_draws=None) -> SimBuilder
     grid_fit(engine, candidates, idx, measured, grids=None) -> {effect: GridFit}
         one pass over the rows scores every grid point of every candidate (mean SSIM; a grid point
         whose spectrograms are not finite scores -inf)
@@ -82,22 +83,28 @@ def calibrate_rcs_exponent(build: SimBuilder, base: Mapping, rows: RowSet, idx: 
     target = torch.as_tensor(measured[idx])
     scores = []
     for e in exponents:
-        engine = VariantEngine(with_rcs_exponent(build, float(e)), base, rows, batch_size=batch_size)
+        engine = VariantEngine(with_settings(build, rcs_exponent=float(e)), base, rows, batch_size=batch_size)
         scores.append(_mean_ssim(target, engine.spectrograms([{}], idx, progress=progress)[0]))
     return float(exponents[int(np.argmax(scores))]), scores
 
 
-def with_rcs_exponent(build: SimBuilder, exponent: float) -> SimBuilder:
-    """``build`` with every simulator's cylinder RCS aspect exponent set to ``exponent``."""
-    if exponent == 1.0:
+def with_settings(build: SimBuilder, *, rcs_exponent: float | None = None, noise_draws: int | None = None) -> SimBuilder:
+    """``build`` whose simulators get the given settings (None: leave as built): the cylinder RCS
+    aspect exponent, and the draws a noise effect averages (its expected spectrogram)."""
+    if rcs_exponent is None and noise_draws is None:
         return build
 
-    def calibrated(effects):
+    def configured(effects):
         sim = build(effects)
-        sim.rcs_exponent = float(exponent)
+        if rcs_exponent is not None:
+            sim.rcs_exponent = float(rcs_exponent)
+        if noise_draws is not None:
+            for e in sim.effects:
+                if hasattr(e, "draws"):
+                    e.draws = int(noise_draws)
         return sim
 
-    return calibrated
+    return configured
 
 
 def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, measured: np.ndarray,

@@ -200,11 +200,16 @@ def power_to_unit(power: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     return ((db - top + chain.dynamic_range_db) / chain.dynamic_range_db).clamp(0.0, 1.0)
 
 
-def spectrogram_from_profiles(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
-    """Per-range-bin slow-time signal of one window -> spectrogram in [0, 1] (..., doppler, columns)."""
+def profile_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
+    """Per-range-bin slow-time signal -> clutter removal (if set) -> STFT power (..., doppler, columns)."""
     if chain.clutter_removal:
         profiles = remove_static_clutter(profiles)
-    return power_to_unit(stft_power(profiles, chain), chain)
+    return stft_power(profiles, chain)
+
+
+def spectrogram_from_profiles(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
+    """Per-range-bin slow-time signal of one window -> spectrogram in [0, 1] (..., doppler, columns)."""
+    return power_to_unit(profile_power(profiles, chain), chain)
 
 
 def measured_spectrogram(adc: np.ndarray | torch.Tensor, radar: RadarConfig, chain: ChainConfig) -> tuple[torch.Tensor, int]:

@@ -54,7 +54,7 @@ from torch import nn
 from handradar.hand.features import HandModelConfig
 from handradar.hand.mesh import bone_radii
 from handradar.hand.retarget import retarget, standard_lengths
-from handradar.radar.chain import ChainConfig, spectrogram_from_profiles
+from handradar.radar.chain import ChainConfig, power_to_unit, profile_power
 from handradar.radar.config import RadarConfig
 from handradar.sim import effects as _effects  # noqa: F401  (registers the eight effects)
 from handradar.sim.effects.base import Effect, SimContext, build_effects
@@ -189,10 +189,19 @@ class Simulator(nn.Module):
         return out if scale is None else out * scale.to(out.real.dtype).reshape(-1, 1, 1, 1, 1)
 
     def spectrogram(self, signal: torch.Tensor) -> torch.Tensor:
-        """Summed signal -> signal-stage effects -> the shared chain -> (B, doppler, columns) in [0, 1]."""
-        for e in self._stage("signal"):
-            signal = e.apply_signal(signal, self.radar, self.chain)
-        return spectrogram_from_profiles(signal, self.chain)
+        """Summed signal -> signal-stage effects -> the shared chain -> (B, doppler, columns) in [0, 1].
+
+        A stochastic signal effect with ``draws`` > 1 (noise) is drawn that many times and the chain's
+        power averaged before dB: the expected spectrogram."""
+        stage = self._stage("signal")
+        draws = max([getattr(e, "draws", 1) for e in stage] + [1])
+        power = 0.0
+        for _ in range(draws):
+            s = signal
+            for e in stage:
+                s = e.apply_signal(s, self.radar, self.chain)
+            power = power + profile_power(s, self.chain)
+        return power_to_unit(power / draws if draws > 1 else power, self.chain)
 
     def forward(self, skeleton: torch.Tensor, mask: torch.Tensor, weights: torch.Tensor | None = None, *,
                 times: torch.Tensor | None = None, visibility: torch.Tensor | None = None) -> torch.Tensor:

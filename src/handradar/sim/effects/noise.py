@@ -7,6 +7,12 @@ range bin and chirp after the FFT: P_signal the mean power of the example's dyna
 time mean removed), P_noise = sigma^2 sum_n w[n]^2. ADC quantisation is not separate: at 16 bits
 it sits far below receiver noise. Draws come from the module's own generator (``seed``);
 ``reset_rng()`` replays them. Fitted by grid (the draws make gradients noisy).
+
+``draws`` > 1 makes the simulator average the power of that many independent draws before dB
+(Simulator.spectrogram): the expected spectrogram, a noise floor at the right level without one
+particular speckle pattern. The gap diagnosis compares with it (a measured speckle pattern is never
+reproduced pixel by pixel, so a single draw costs SSIM even at the right level); synthetic training
+data keep one draw (draws = 1), like a measurement.
 """
 
 from __future__ import annotations
@@ -25,9 +31,12 @@ class Noise(Effect):
     fit = "grid"
     params = {"snr_db": Param(20.0, -20.0, 60.0, (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0, 40.0), "signal-to-noise ratio per range bin, dB")}
 
-    def __init__(self, seed: int = 0, **values: float) -> None:
+    def __init__(self, seed: int = 0, draws: int = 1, **values: float) -> None:
         super().__init__(**values)
         self.seed = int(seed)
+        if int(draws) < 1:
+            raise ValueError(f"noise: draws must be >= 1, found {draws}")
+        self.draws = int(draws)
         self.reset_rng()
 
     def reset_rng(self) -> None:
