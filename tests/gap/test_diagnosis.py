@@ -94,8 +94,9 @@ def test_baseline_calibration_recovers_the_rcs_exponent(radar, short_chain):
 
 def test_grid_overrides_replace_the_documented_values():
     g = effect_grid("multipath", {"multipath": {"height_m": [0.1, 0.2]}})
-    n_coeff = len(REGISTRY["multipath"].params["reflection_coeff"].grid)
-    assert {p["height_m"] for p in g} == {0.1, 0.2} and len(g) == 2 * n_coeff
+    params = REGISTRY["multipath"].params
+    n_rest = len(params["reflection_coeff"].grid) * len(params["scale"].grid)
+    assert {p["height_m"] for p in g} == {0.1, 0.2} and len(g) == 2 * n_rest
     assert effect_grid("palm") == REGISTRY["palm"].grid()
     with pytest.raises(ValueError, match="height_m"):
         effect_grid("multipath", {"multipath": {"height_m": [0.9]}})  # outside the bounds [0, 0.5]

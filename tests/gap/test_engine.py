@@ -12,8 +12,8 @@ from tests.gap.conftest import builder, rows
 
 VARIANTS = [{}, {"noise": {"snr_db": 10.0}}, {"palm": {"radius_m": 0.03}},
             {"forearm": {"length_m": 0.1, "radius_m": 0.02}}, {"forearm": {"length_m": 0.1, "radius_m": 0.04}},
-            {"multipath": {"height_m": 0.05, "reflection_coeff": 0.2}},
-            {"multipath": {"height_m": 0.05, "reflection_coeff": 0.5}},  # reuses the previous per-point profiles
+            {"multipath": {"height_m": 0.03, "scale": 0.3}},
+            {"multipath": {"height_m": 0.03, "scale": 1.0}},  # reuses the previous per-point profiles
             {"antenna_pattern": {"q": 6.0}}, {"sync_offset": {"offset_s": 0.05}}]
 
 
@@ -25,7 +25,7 @@ def test_variants_match_full_simulation(radar, short_chain, base):
     out = engine.spectrograms(VARIANTS)
     paths = {k: p for (k, p) in engine.paths}
     assert paths["noise"] == "signal" and paths["sync_offset"] == "full"
-    assert paths["forearm"] == "added"  # with a multipath base: the forearm points and their images
+    assert paths["forearm"] == "added"  # forearm points do not bounce: added also on a multipath base
     assert paths["palm"] == ("full" if "palm" in base else "added")  # a changed palm radius moves no point but its RCS
     assert paths["antenna_pattern"] == ("reweighted" if not base else "full")  # one batch: the same noise draws
     for v, spec in zip(VARIANTS, out):

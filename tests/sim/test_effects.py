@@ -11,7 +11,7 @@ import torch
 from handradar.hand.retarget import standard_hand
 from handradar.radar.chain import gate_bins, remove_static_clutter, stft_power
 from handradar.sim.effects import EFFECT_NAMES, REGISTRY, STAGES, Effect, build_effects
-from handradar.sim.effects.multipath import Multipath
+from handradar.sim.effects.multipath import bounce_paths
 from handradar.sim.effects.palm import palm_frame
 from handradar.sim.rcs import cos_angle, disc_rcs_m2
 from handradar.sim.scatterers import Scatterers
@@ -174,32 +174,59 @@ def test_forearm_adds_reflectors_beyond_the_wrist(radar, short_chain):
 
 
 # ---- multipath -----------------------------------------------------------------------------------
-def test_multipath_image_geometry_and_gains():
-    p = torch.tensor([[[[0.05, 0.02, 0.30]]]], dtype=torch.float64)
-    scat = Scatterers(p, p, torch.full((1, 1, 1), 1e-3, dtype=torch.float64), torch.ones(1, 1, 1, dtype=torch.float64),
-                      torch.tensor([7]))
-    out = Multipath(height_m=0.05, reflection_coeff=0.4).apply_scatterers(scat, None)
-    image = torch.tensor([0.05, 0.02, -0.40], dtype=torch.float64)
-    assert out.n_points == 3 and out.owner.tolist() == [7, 7, 7]
-    torch.testing.assert_close(out.rx[0, 0, 1], image)  # one bounce: out direct, back via the table
-    torch.testing.assert_close(out.tx[0, 0, 2], image)  # two bounces: both legs via the table
-    torch.testing.assert_close(out.rx[0, 0, 2], image)
-    torch.testing.assert_close(out.gain[0, 0], torch.tensor([1.0, 0.8, 0.16], dtype=torch.float64))
+def test_multipath_bounce_paths_closed_form():
+    """Path length |p| + d + |q| (directly or via the table image) and the two-scatterer radar equation."""
+    f64 = dict(dtype=torch.float64)
+    p, q = torch.tensor([0.0, 0.05, 0.30], **f64), torch.tensor([0.0, -0.06, 0.28], **f64)
+    x = torch.tensor([1.0, 0.0, 0.0], **f64)  # both bones along x: broadside to every leg (all in the y-z plane)
+    r, length, wl, h = torch.tensor(0.008, **f64), torch.tensor(0.04, **f64), 0.0039, 0.01
+    cap = 2 * math.pi * 0.008 * 0.04**2 / wl
+    for height, q_leg in ((None, q), (torch.tensor(h, **f64), q * torch.tensor([1.0, 1.0, -1.0], **f64) - torch.tensor([0, 0, 2 * h], **f64))):
+        tx, rx, s_p, gain = bounce_paths(p, x, length, r, q, x, length, r, height, wl, 1.0)
+        d = float((q_leg - p).norm())
+        assert float(tx.norm() + rx.norm()) == pytest.approx(float(p.norm()) + d + float(q.norm()), rel=1e-12)
+        torch.testing.assert_close(rx / rx.norm(), q / q.norm())  # arrives from q's direction
+        amp = torch.sqrt(s_p) * gain / (tx.norm() * rx.norm())
+        assert float(s_p) == pytest.approx(cap, rel=1e-9)
+        expect = math.sqrt(cap * cap / (4 * math.pi)) / (float(p.norm()) * d * float(q.norm()))
+        assert float(amp) == pytest.approx(expect, rel=1e-9)
 
 
-def test_multipath_adds_delayed_echoes(radar, short_chain):
+def test_multipath_bounces_land_at_the_path_range_and_follow_the_bones(radar, short_chain):
     times = steps(radar, short_chain)
-    sk, mk = batch(*hand_window(times))
-    plain = bin_power(Simulator(radar, short_chain).slot_profiles(sk, mk).sum(1))
-    sim = Simulator(radar, short_chain, effects=["multipath"], effect_params={"multipath": {"height_m": 0.2, "reflection_coeff": 0.5}})
-    mp = bin_power(sim.slot_profiles(sk, mk).sum(1))
+    sk, mk = batch(*hand_window(times, hands=2))
+    plain = Simulator(radar, short_chain)
+    sim = Simulator(radar, short_chain, effects=["multipath"],
+                    effect_params={"multipath": {"height_m": 0.01, "reflection_coeff": 1.0, "scale": 1.0}})
+    ctx = sim.context(sk.double(), mk, times=torch.as_tensor(times))
+    scat = sim.scatterers(ctx)
+    extra = scat.owner == -1
+    assert int(extra.sum()) == 2 * sim.effect("multipath").n_paths
+    # hand -> table -> hand paths run about twice the hand's range: their echoes lie beyond the hand
     b0 = gate_bins(radar, short_chain)[0]
-    near = round(0.32 / radar.range_resolution_m) - b0  # the hand, 0.30-0.33 m
-    far = round(0.47 / radar.range_resolution_m) - b0  # one-bounce echoes at (0.3 + 0.7) / 2 = 0.5 m
-    assert float(mp[far:].sum()) > 100 * float(plain[far:].sum())
-    assert float(mp[far:].sum()) > 0.1 * float(mp[: near + 1].sum())
-    sim.effect("multipath").set_values(reflection_coeff=0.0)
-    torch.testing.assert_close(sim(sk, mk), Simulator(radar, short_chain)(sk, mk))
+    far = round(0.50 / radar.range_resolution_m) - b0
+    mp, base = bin_power(sim.slot_profiles(sk, mk).sum(1)), bin_power(plain.slot_profiles(sk, mk).sum(1))
+    assert float(mp[far:].sum()) > 100 * float(base[far:].sum())
+    # an untracked hand bounces nothing; scale 0 is the plain simulator
+    one = mk.clone()
+    one[..., 1] = False
+    gains = sim.scatterers(sim.context(sk.double(), one, times=torch.as_tensor(times))).gain[..., -sim.effect("multipath").n_paths:]
+    assert float(gains.abs().max()) == 0.0
+    sim.effect("multipath").set_values(scale=0.0)
+    torch.testing.assert_close(sim(sk, mk), plain(sk, mk))
+
+
+def test_multipath_is_differentiable_in_its_parameters(radar, short_chain):
+    times = steps(radar, short_chain)[:8]
+    sk, mk = batch(*hand_window(times, hands=2))
+    sim = Simulator(radar, short_chain, effects=["multipath"]).double()
+    eff = sim.effect("multipath").requires_grad_(True)
+    ctx = sim.context(sk.double(), mk, times=torch.as_tensor(times))
+    amp = sim.scatterers(ctx)
+    loss = (torch.sqrt(amp.rcs_m2) * amp.gain / (amp.tx.norm(dim=-1) * amp.rx.norm(dim=-1))).sum() \
+        + (amp.tx.norm(dim=-1) + amp.rx.norm(dim=-1)).sum()
+    loss.backward()
+    assert all(p.grad is not None and torch.isfinite(p.grad) and float(p.grad) != 0.0 for p in eff.parameters())
 
 
 # ---- antenna pattern -----------------------------------------------------------------------------

@@ -6,7 +6,7 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    calibrate the baseline: the aspect exponent of its cylinder RCS (handradar.sim.rcs; 1 = the
    paper's formula) that fits the calibration split best (``rcs_exponents``). This generic
    calibration comes first so that candidates are scored on the gap it leaves: without it, any
-   candidate that adds slow, broad returns (multipath images, a palm) closes part of the generic
+   candidate that adds slow, broad returns (a palm disc, radar-table image paths) closes part of the generic
    "the cylinders are too specular" gap in every data set and wins where its effect is absent;
 2. where: the signed mean residual (measured - simulated) over Doppler and time, SSIM by factor
    (gesture, angle, hands, occlusion, subject), and per reflection point from the per-bone
@@ -69,7 +69,7 @@ class DiagnosisConfig:
     seed: int = 0  # fixes the split, the fitting subsets, the bootstrap and RadarWeightNet's training
     calibration_fraction: float = 0.5
     candidates: list[str] | None = None  # None: every effect not in the baseline simulator
-    rcs_exponents: list[float] | None = field(default_factory=lambda: [1.0, 0.75, 0.5, 0.25])
+    rcs_exponents: list[float] | None = field(default_factory=lambda: [1.0, 0.75, 0.5, 0.25, 0.1, 0.0])
     # the baseline's cylinder RCS aspect exponents tried (None or [1.0]: the paper's RCS, uncalibrated)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
     noise_draws: int = 4  # a noise effect's draws averaged in power: compare with its expected spectrogram

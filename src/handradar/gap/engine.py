@@ -8,11 +8,10 @@ computed once; then each variant takes the cheapest path that gives its signal:
 
 - signal-stage effects only (noise): the base's summed signal goes through the variant's signal
   stage and the chain. Exact.
-- scatterer-stage effects that only add reflection points (palm, forearm, multipath; also palm or
-  forearm with their multipath images on a base with multipath): base signal + the profiles of the
-  added points. Exact (profiles add up).
+- scatterer-stage effects that only add reflection points (palm, forearm, multipath): base signal
+  + the profiles of the added points. Exact (profiles add up).
   Appended points whose positions equal those of the previous variant and whose amplitudes differ
-  by a per-point factor constant in time (multipath's reflection coefficient, forearm's radius)
+  by a per-point factor constant in time (multipath's scale and reflection coefficient, forearm's radius)
   reuse the stored per-point profiles scaled by that factor. Exact.
 - scatterer-stage effects that only rescale points (occlusion, antenna_pattern): the base's slot
   profiles are re-weighted through Simulator.combine with the per-slot amplitude ratio as weights.

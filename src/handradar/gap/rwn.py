@@ -8,10 +8,10 @@ paired bootstrap of its difference to the best physical effect).
 
 Weight correlation: for each candidate effect at its fitted values, the per-bone amplitude change
 log(A_k,effect / A_k,baseline) at every skeleton step (A_k: root sum of squares of the radar-equation
-amplitudes of bone slot k's reflection points, multipath images included) is correlated (Pearson,
+amplitudes of bone slot k's reflection points) is correlated (Pearson,
 over evaluation rows x steps x tracked bone slots, each row's mean removed from both since a row's
 overall scale does not reach its normalised spectrogram) with the learned log weight log w_k.
-Effects that change no bone's amplitude (palm, forearm add unweighted points; noise; a clock
+Effects that change no bone's amplitude (palm, forearm, multipath add unweighted points; noise; a clock
 offset) have no such correlation (null).
 
     rwn_readout(data, build, base, features, profiles, train_idx, eval_idx, before_ssim, candidates,

@@ -35,8 +35,8 @@ Public API:
       .chirp_times (F, L, C) float64 buffer, seconds
       .context(skeleton, mask, *, times, visibility) -> SimContext (retargeted joints, ...) for effects
       .scatterers(ctx) -> Scatterers (bones + scatterer-stage effects);  .profiles_of(scat, times) -> slot profiles
-    slot 38 of the profiles holds the unweighted reflectors (palm, forearm); multipath images of a
-    bone stay in that bone's slot. With the cache's float16 real view pass its ``scale``.
+    slot 38 of the profiles holds the unweighted reflectors (palm, forearm, multipath's bone-to-bone
+    bounces). With the cache's float16 real view pass its ``scale``.
     skeleton: (B, T, 2, 21, 3) metres radar frame; mask (B, T, 2) bool (untracked hands reflect nothing);
     visibility: optional (B, T, 2, 19) visible/facing fraction from the feature cache (the occlusion
     effect ray casts it itself when absent).

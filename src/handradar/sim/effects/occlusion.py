@@ -47,6 +47,6 @@ class Occlusion(Effect):
         amp = torch.where(hidden, torch.zeros_like(power), torch.sqrt(torch.where(hidden, torch.ones_like(power), power)))
         factor = torch.ones_like(scat.gain)
         bone = (scat.owner >= 0) & (scat.owner < N_SLOTS)
-        # every point owned by bone k (its multipath images included) takes bone k's factor
+        # every point owned by bone k takes bone k's factor (multipath, later, bounces off the shadowed gains)
         factor[..., bone] = amp[..., scat.owner[bone]]
         return scat.scaled(factor)
