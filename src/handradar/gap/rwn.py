@@ -80,7 +80,7 @@ def rwn_readout(data, build, base, features, profiles, train_idx: np.ndarray, ev
             opt.zero_grad()
             loss.backward()
             opt.step()
-            losses.append(float(loss))
+            losses.append(float(loss.detach()))
         last = float(np.mean(losses))
     net.eval()
     specs, weights = [], []

@@ -88,10 +88,9 @@ def _strongest(tx, rx, rcs, gain, n: int) -> Scatterers:
         amp = torch.sqrt(rcs) * gain / (tx.norm(dim=-1) * rx.norm(dim=-1)).clamp_min(1e-6)
         pick = torch.topk(amp.pow(2).mean(1), k, dim=-1).indices  # (B, k)
     idx = pick[:, None, :].expand(b, t, k)
-    take = lambda x: torch.gather(x, 2, idx)  # noqa: E731
-    take3 = lambda x: torch.gather(x, 2, idx[..., None].expand(b, t, k, 3))  # noqa: E731
-    return Scatterers(take3(tx), take3(rx), take(rcs), take(gain), torch.full((k,), -1, dtype=torch.long,
-                                                                               device=gain.device))
+    idx3 = idx[..., None].expand(b, t, k, 3)
+    return Scatterers(torch.gather(tx, 2, idx3), torch.gather(rx, 2, idx3), torch.gather(rcs, 2, idx),
+                      torch.gather(gain, 2, idx), torch.full((k,), -1, dtype=torch.long, device=gain.device))
 
 
 @register
