@@ -102,6 +102,8 @@ class DiagnosisConfig:
             cfg["rcs_exponents"] = [float(e) for e in cfg["rcs_exponents"]]
             if not cfg["rcs_exponents"] or not all(0.0 <= e <= 1.0 for e in cfg["rcs_exponents"]):
                 raise ValueError(f"diagnose.rcs_exponents: values in [0, 1] expected, found {cfg['rcs_exponents']}")
+        if int(cfg.get("noise_draws", 1)) < 1:
+            raise ValueError(f"diagnose.noise_draws must be >= 1, found {cfg['noise_draws']}")
         if cfg.get("grids") is not None:
             cfg["grids"] = {str(k): {str(p): [float(x) for x in v] for p, v in dict(g).items()}
                             for k, g in dict(cfg["grids"]).items()}
@@ -251,8 +253,6 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
     if len(ev) < 20:
         log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
                     "(use 30 or more)", len(ev))
-    if cfg.noise_draws < 1:
-        raise ValueError(f"diagnose.noise_draws must be >= 1, found {cfg.noise_draws}")
     build = with_settings(build, noise_draws=cfg.noise_draws)
     fit_idx = _subset(data.labels, cal, cfg.fit_rows, cfg.seed + 1)
     refine_idx = _subset(data.labels, cal, cfg.refine_rows, cfg.seed + 2)

@@ -18,7 +18,6 @@ their grids, then optional gradient steps.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -50,21 +49,10 @@ class GridFit:
 def effect_grid(name: str, overrides: Mapping[str, Mapping[str, Sequence[float]]] | None = None) -> list[dict[str, float]]:
     """The fitting grid of effect ``name``: its documented grid with the values of any parameter in
     ``overrides[name]`` replaced (e.g. a raised radar: {"multipath": {"height_m": [0.1, 0.2]}})."""
-    cls = REGISTRY[name]
-    own = dict((overrides or {}).get(name) or {})
-    unknown = set(own) - set(cls.params)
-    if unknown:
-        raise ValueError(f"diagnose.grids.{name}: unknown parameter(s) {sorted(unknown)}; expected some of "
-                         f"{sorted(cls.params)}")
-    axes = {}
-    for key, spec in cls.params.items():
-        values = [float(v) for v in own.get(key, spec.grid)]
-        bad = [v for v in values if not spec.low <= v <= spec.high]
-        if not values or bad:
-            raise ValueError(f"diagnose.grids.{name}.{key}: {values or 'no values'}; each must lie in "
-                             f"[{spec.low}, {spec.high}]")
-        axes[key] = values
-    return [dict(zip(axes, combo)) for combo in itertools.product(*axes.values())]
+    try:
+        return REGISTRY[name].grid((overrides or {}).get(name))
+    except ValueError as err:
+        raise ValueError(f"diagnose.grids.{err}") from None
 
 
 def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:

@@ -201,7 +201,7 @@ class Simulator(nn.Module):
             for e in stage:
                 s = e.apply_signal(s, self.radar, self.chain)
             power = power + profile_power(s, self.chain)
-        return power_to_unit(power / draws if draws > 1 else power, self.chain)
+        return power_to_unit(power / draws, self.chain)
 
     def forward(self, skeleton: torch.Tensor, mask: torch.Tensor, weights: torch.Tensor | None = None, *,
                 times: torch.Tensor | None = None, visibility: torch.Tensor | None = None) -> torch.Tensor:

@@ -13,8 +13,9 @@ Contract of an effect (handradar.sim.effects.base.Effect):
   ``nn.Parameter``s of the same names, frozen (requires_grad False) unless a fitter unfreezes them;
   ``value(k)`` is the bounded value the physics uses.
 - construction ``Cls(**values)``; ``values()`` -> dict; ``set_values(**values)`` (bounds checked);
-  ``clamp_()`` projects into bounds after an optimiser step; ``Cls.grid()`` -> the documented grid
-  (Cartesian product of the per-parameter grids, at most a dozen points); ``Cls.defaults()``.
+  ``clamp_()`` projects into bounds after an optimiser step; ``Cls.grid(overrides=None)`` -> the
+  documented grid (Cartesian product of the per-parameter grids, at most a dozen points; a
+  parameter's values replaced by ``overrides[param]``); ``Cls.defaults()``.
 - hooks (one overridden per effect): ``apply_skeleton(positions, mask, times)``,
   ``apply_scatterers(scatterers, ctx)``, ``apply_signal(signal, radar, chain)``.
 

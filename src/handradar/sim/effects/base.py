@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
@@ -104,10 +105,20 @@ class Effect(nn.Module):
             getattr(self, key).clamp_(spec.low, spec.high)
 
     @classmethod
-    def grid(cls) -> list[dict[str, float]]:
-        """The documented fitting grid: the Cartesian product of every parameter's grid values."""
-        keys = list(cls.params)
-        return [dict(zip(keys, combo)) for combo in itertools.product(*(cls.params[k].grid for k in keys))]
+    def grid(cls, overrides: Mapping[str, Sequence[float]] | None = None) -> list[dict[str, float]]:
+        """The fitting grid: the Cartesian product of every parameter's grid values, the documented
+        ones unless ``overrides[param]`` replaces them (bounds checked)."""
+        own = dict(overrides or {})
+        unknown = set(own) - set(cls.params)
+        if unknown:
+            raise ValueError(f"{cls.name}: unknown parameter(s) {sorted(unknown)}; expected some of {sorted(cls.params)}")
+        axes = {}
+        for key, spec in cls.params.items():
+            values = [float(v) for v in own.get(key, spec.grid)]
+            if not values or not all(spec.low <= v <= spec.high for v in values):
+                raise ValueError(f"{cls.name}.{key}: {values or 'no values'}; each must lie in [{spec.low}, {spec.high}]")
+            axes[key] = values
+        return [dict(zip(axes, combo)) for combo in itertools.product(*axes.values())]
 
     @classmethod
     def defaults(cls) -> dict[str, float]:

@@ -21,7 +21,7 @@ A path enters the simulator as one point with tx = p and rx = q moved outwards a
 sight by d, so that the half path (|tx| + |rx|) / 2 and both directions (for antenna_pattern) are
 right, and the remaining factors go into its gain. Of the 38 x 38 table pairs and the 19 x 19
 hand-hand pairs, the ``n_paths`` strongest of each kind (rms amplitude over the window, per row,
-selected at the nominal coefficients) are kept. The points are unweighted (slot -1): no single
+before ``scale`` and Gamma multiply in, so the choice does not depend on them) are kept. The points are unweighted (slot -1): no single
 bone's RadarWeightNet weight scales a path between two bones. Palm and forearm points do not
 bounce. Differentiable in every parameter.
 
