@@ -52,6 +52,34 @@ def test_cylinder_directly_behind_a_larger_one_is_hidden(backend):
     assert v_alone[0, PINKY_DISTAL] == f_alone[0, PINKY_DISTAL] == facing[1, PINKY_DISTAL]
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_overlapping_cylinders_do_not_count_as_shadowing_each_other(backend):
+    """Two side-by-side cylinders 1.2 radii apart overlap (like a flat hand's metacarpals): the vertices
+    each buries inside the other are neither facing nor visible, so both stay in (nearly) full view: a
+    few vertices next to the seam are in the other's true, grazing shadow."""
+    r = 0.01
+    scene = np.stack([one_cylinder_hand((-0.04, 0, 0.3), (0.04, 0, 0.3), THUMB_DISTAL),
+                      one_cylinder_hand((-0.04, 1.2 * r, 0.3), (0.04, 1.2 * r, 0.3), PINKY_DISTAL)])
+    vis, facing = visibility_step(scene, radii=radii(r, r), backend=backend)
+    v_alone, f_alone = visibility_step(scene[:1], radii=radii(r, r), backend=backend)
+    for h, bone in ((0, THUMB_DISTAL), (1, PINKY_DISTAL)):
+        assert vis[h, bone] >= 0.95 * facing[h, bone] and facing[h, bone] > 0.5 * f_alone[0, THUMB_DISTAL]
+        assert facing[h, bone] < f_alone[0, THUMB_DISTAL]  # the buried strip is left out
+    # moved 2.2 radii apart they no longer touch: every facing vertex counts again
+    apart = scene.copy()
+    apart[1, :, 1] += 1.0 * r
+    _, f_apart = visibility_step(apart, radii=radii(r, r), backend=backend)
+    assert f_apart[0, THUMB_DISTAL] == f_alone[0, THUMB_DISTAL]
+
+
+def test_flat_hand_is_in_full_view_from_below():
+    """A flat hand seen from below hides nothing of itself: every bone > 85 % visible (the metacarpals
+    were 27-65 % while overlapping cylinders counted as shadow)."""
+    joints = (standard_hand() + [0.0, -0.08, 0.28])[None, None].repeat(2, 1)
+    frac = visibility(joints, np.array([[True, False]])).fraction()[0, 0]
+    assert frac.min() > 0.85, frac
+
+
 def _analytic_hidden(points: np.ndarray, a: np.ndarray, b: np.ndarray, r: float) -> np.ndarray:
     """True where the segment from each point to the origin passes through the exact cylinder a-b of radius r."""
     axis = (b - a) / np.linalg.norm(b - a)

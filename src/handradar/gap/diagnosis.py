@@ -78,7 +78,7 @@ class DiagnosisConfig:
     refine_rows: int = 8  # calibration rows of each gradient step
     refine_lr: float = 0.05  # Adam step as a fraction of each parameter's range
     n_boot: int = 2000
-    min_gap_closed: float = 0.0  # smallest gap_closed worth naming a cause / adding an effect (practical relevance)
+    min_gap_closed: float = 0.02  # smallest gap_closed worth naming a cause / adding an effect (conf/diagnose.yaml)
     greedy_max: int = 3  # most effects the forward selection adds
     batch_size: int = 8
     radarweightnet: bool = True

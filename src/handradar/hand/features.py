@@ -53,7 +53,7 @@ from handradar.provenance import config_hash
 
 FEATURE_NAMES = ("visible_vertices", "rcs_m2", "distance_m", "radial_velocity_m_s", "radial_acceleration_m_s2")
 N_FEATURES = len(FEATURE_NAMES)
-CACHE_FORMAT = "handradar.bone_features/1"
+CACHE_FORMAT = "handradar.bone_features/2"  # 2: buried mesh vertices count as neither facing nor visible
 
 
 @dataclass(frozen=True)
