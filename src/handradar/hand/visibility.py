@@ -89,16 +89,23 @@ def _facing(verts: np.ndarray, template: CylinderTemplate) -> np.ndarray:
     return np.where(vf >= 0, toward[:, np.clip(vf, 0, None)], False).any(-1)
 
 
-def _buried(points: np.ndarray, own: np.ndarray, start: np.ndarray, axis: np.ndarray, length: np.ndarray,
+def _buried(verts: np.ndarray, start: np.ndarray, axis: np.ndarray, length: np.ndarray,
             radius: np.ndarray) -> np.ndarray:
-    """(N,) bool: ``points`` (N, 3) lying strictly inside a cylinder other than their own (``own``, (N,)
-    cylinder index); the C cylinders given by start (C, 3), unit axis (C, 3), length and radius (C,)."""
-    rel = points[:, None, :] - start[None]  # (N, C, 3)
-    along = np.einsum("ncj,cj->nc", rel, axis)
-    radial2 = np.einsum("ncj,ncj->nc", rel, rel) - along**2
-    inside = (along > RAY_OFFSET_M) & (along < length - RAY_OFFSET_M) & (radial2 < (radius - RAY_OFFSET_M) ** 2)
-    inside[np.arange(len(points)), own] = False
-    return inside.any(-1)
+    """(C, V) bool: the vertices ``verts`` (C, V, 3) of each of C cylinders that lie strictly inside
+    another one; cylinders given by start (C, 3), unit axis (C, 3), length and radius (C,), metres.
+    Only pairs whose bounding spheres meet are tested (a bone has a handful of neighbours)."""
+    centre = start + 0.5 * length[:, None] * axis
+    reach = np.hypot(0.5 * length, radius)
+    gap = np.linalg.norm(centre[:, None] - centre[None], axis=-1) - reach[:, None] - reach[None]
+    own, other = np.nonzero((gap < 0) & ~np.eye(len(start), dtype=bool) & (length[None] > 0))
+    rel = verts[own] - start[other][:, None]  # (P, V, 3)
+    along = np.einsum("pvj,pj->pv", rel, axis[other])
+    radial2 = np.einsum("pvj,pvj->pv", rel, rel) - along**2
+    inside = ((along > RAY_OFFSET_M) & (along < length[other][:, None] - RAY_OFFSET_M)
+              & (radial2 < (radius[other][:, None] - RAY_OFFSET_M) ** 2))
+    out = np.zeros(verts.shape[:2], bool)
+    np.logical_or.at(out, own, inside)
+    return out
 
 
 def visibility_step(joints: np.ndarray, *, radii: np.ndarray | None = None,
@@ -111,13 +118,11 @@ def visibility_step(joints: np.ndarray, *, radii: np.ndarray | None = None,
         return np.zeros((0, N_BONES), np.int32), np.zeros((0, N_BONES), np.int32)
     verts = bone_vertices(joints, radii, template).reshape(h * N_BONES, template.n_vertices, 3)
     facing = _facing(verts, template)  # (C, V)
-    start, axis, length = bone_frames(joints)
-    c_idx, v_idx = np.nonzero(facing)
     # buried = inside another cylinder's inscribed prism (radius x cos(pi / sections)), where the ray
     # caster, which sees the faceted surface, blocks it anyway: leaving it out changes facing only
+    start, axis, length = bone_frames(joints)
     radius = np.tile(bone_radii() if radii is None else np.asarray(radii, np.float64), h) * np.cos(np.pi / template.sections)
-    facing[c_idx, v_idx] = ~_buried(verts[c_idx, v_idx], c_idx, start.reshape(-1, 3), axis.reshape(-1, 3),
-                                    length.reshape(-1), radius)
+    facing &= ~_buried(verts, start.reshape(-1, 3), axis.reshape(-1, 3), length.reshape(-1), radius)
     n_occ = len(template.occluder_vertices)
     faces = (template.occluder_faces_compact[None] + n_occ * np.arange(h * N_BONES)[:, None, None]).reshape(-1, 3)
     mesh = trimesh.Trimesh(verts[:, template.occluder_vertices].reshape(-1, 3), faces, process=False, validate=False)
