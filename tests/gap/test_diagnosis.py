@@ -125,3 +125,25 @@ def test_a_candidate_with_non_finite_spectrograms_is_left_out(radar, short_chain
     assert rep["cause"] == "antenna_pattern"
     assert [c["effect"] for c in rep["candidates"]] == ["antenna_pattern"]
     assert [e["effect"] for e in rep["excluded"]] == ["broken"] and "non-finite" in rep["excluded"][0]["reason"]
+
+
+def test_a_significant_but_small_gain_names_no_cause():
+    """The practical-relevance rule: a candidate whose gain is significant (CI above 0, clearly ahead of
+    the runner-up) but below ``min_gap_closed`` is reported, not named; at or above it, it is named."""
+    from handradar.gap.diagnosis import Candidate, _evidence
+    from handradar.gap.fit import GridFit
+
+    rng = np.random.default_rng(0)
+    before = rng.uniform(0.8, 0.9, 200)
+    gap = 1.0 - before
+
+    def cand(name: str, closed: float) -> Candidate:
+        ssim = before + closed * gap + rng.normal(0.0, 1e-4, before.shape)
+        return Candidate(name, {}, GridFit(name, [], []), ssim, np.zeros_like(ssim), closed, (0.8 * closed, 1.2 * closed))
+
+    small, other = cand("noise", 0.01), cand("palm", 0.0)
+    cfg = DiagnosisConfig(n_boot=200)
+    assert cfg.min_gap_closed == 0.02
+    ev = _evidence(before, [small, other], cfg)
+    assert ev["clearly_ahead"] and not ev["leader_significant"]
+    assert _evidence(before, [small, other], DiagnosisConfig(n_boot=200, min_gap_closed=0.005))["leader_significant"]
