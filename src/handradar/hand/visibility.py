@@ -8,7 +8,7 @@ nothing else is in the way, so ``visible / facing`` is the un-occluded fraction 
 full view, 0 = hidden). Buried vertices are left out of both counts because neighbouring cylinders
 of the mesh overlap (the four metacarpals of a flat hand, a phalanx where it meets the next): that
 overlap is an artefact of modelling a hand as separate cylinders, not a part hiding another, and
-counting it as shadow left a flat hand's metacarpals only 30-50 % visible.
+counting it as shadow left a flat hand's metacarpals only 27-65 % visible.
 Only facing vertices are ray cast (the others are hidden by their own cylinder), against the
 cylinders' occluder triangles (mesh.CylinderTemplate.occluder_faces: the same surface without the
 intermediate rings, 10x fewer triangles).
