@@ -8,8 +8,8 @@ import pytest
 import torch
 
 from handradar.gap.data import GapData
-from handradar.gap.diagnosis import DiagnosisConfig, diagnose
-from handradar.gap.fit import effect_grid
+from handradar.gap.diagnosis import Candidate, DiagnosisConfig, _evidence, diagnose
+from handradar.gap.fit import GridFit, effect_grid
 from handradar.gap.report import validate_report
 from handradar.sim.effects import REGISTRY, Effect
 from handradar.sim.effects.base import Param
@@ -130,9 +130,6 @@ def test_a_candidate_with_non_finite_spectrograms_is_left_out(radar, short_chain
 def test_a_significant_but_small_gain_names_no_cause():
     """The practical-relevance rule: a candidate whose gain is significant (CI above 0, clearly ahead of
     the runner-up) but below ``min_gap_closed`` is reported, not named; at or above it, it is named."""
-    from handradar.gap.diagnosis import Candidate, _evidence
-    from handradar.gap.fit import GridFit
-
     rng = np.random.default_rng(0)
     before = rng.uniform(0.8, 0.9, 200)
     gap = 1.0 - before

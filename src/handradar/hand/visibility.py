@@ -116,12 +116,13 @@ def visibility_step(joints: np.ndarray, *, radii: np.ndarray | None = None,
     h = joints.shape[0]
     if h == 0:
         return np.zeros((0, N_BONES), np.int32), np.zeros((0, N_BONES), np.int32)
+    radii = bone_radii() if radii is None else np.asarray(radii, np.float64)
     verts = bone_vertices(joints, radii, template).reshape(h * N_BONES, template.n_vertices, 3)
     facing = _facing(verts, template)  # (C, V)
     # buried = inside another cylinder's inscribed prism (radius x cos(pi / sections)), where the ray
     # caster, which sees the faceted surface, blocks it anyway: leaving it out changes facing only
     start, axis, length = bone_frames(joints)
-    radius = np.tile(bone_radii() if radii is None else np.asarray(radii, np.float64), h) * np.cos(np.pi / template.sections)
+    radius = np.tile(radii, h) * np.cos(np.pi / template.sections)
     facing &= ~_buried(verts, start.reshape(-1, 3), axis.reshape(-1, 3), length.reshape(-1), radius)
     n_occ = len(template.occluder_vertices)
     faces = (template.occluder_faces_compact[None] + n_occ * np.arange(h * N_BONES)[:, None, None]).reshape(-1, 3)
