@@ -10,7 +10,7 @@ import pytest
 from omegaconf import OmegaConf
 
 from handradar.data.hdf5 import open_writer
-from handradar.gap.benchmark import case_world, cases, run_benchmark, score
+from handradar.gap.benchmark import case_world, cases, layout_oracle, run_benchmark, score, turned
 from handradar.sim.effects import EFFECT_NAMES
 from tests.gap.conftest import rows, simulate
 
@@ -44,6 +44,33 @@ def test_score_counts_effects_and_controls():
     assert m.sum() == 3 and m[0, s["labels"].index("palm")] == 1 and m[1, s["labels"].index("none")] == 1
 
 
+def _spectrogram_file(path, spec):
+    with h5py.File(path, "w") as f:
+        f["spectrograms"] = np.clip(spec, 0.0, 1.0).astype(np.float32)
+    return path
+
+
+def test_layout_oracle_credits_a_systematic_effect_and_not_speckle(tmp_path):
+    """A broad added component reproduces across facet layouts (gap_closed > 0); an effect that only
+    redraws the speckle does not (<= 0): the oracle tells the two apart."""
+    rng = np.random.default_rng(0)
+    n = 40
+    speckle = lambda: 0.3 * rng.random((n, 64, 32))  # noqa: E731  (a layout's own fine structure)
+    blob = np.zeros((64, 32))
+    blob[24:40, 8:24] = 0.5
+    layout0, layout1 = speckle(), speckle()
+    f = lambda name, x: _spectrogram_file(tmp_path / f"{name}.h5", x)  # noqa: E731
+    clean_turned = f("clean1", layout1)
+    systematic = layout_oracle(f("sys0", layout0 + blob), clean_turned, f("sys1", layout1 + blob), n_boot=300)
+    assert systematic["oracle_ci95"][0] > 0.1
+    redrawn = layout_oracle(f("spk0", layout0 + speckle()), clean_turned, f("spk1", layout1 + speckle()), n_boot=300)
+    assert redrawn["oracle_gap_closed"] <= 0
+    assert turned({"scene": {"finger_sides": 8}, "subjects": 2}, 0.5) == {"scene": {"finger_sides": 8, "facet_turn": 0.5},
+                                                                          "subjects": 2}
+    with pytest.raises(ValueError, match="shapes differ"):
+        layout_oracle(f("short", layout0[:5]), clean_turned, clean_turned)
+
+
 def fake_world(world_cfg, radar, chain, cache_dir):
     """A stand-in for handradar.world.build_world_dataset: the simulator with the world's enabled
     vocabulary effects (antenna_pattern at q = 6) makes the 'measured' spectrograms."""
@@ -51,7 +78,10 @@ def fake_world(world_cfg, radar, chain, cache_dir):
     on = [n for n, e in world_cfg["effects"].items() if e.get("enabled") and n in EFFECT_NAMES]
     rs, labels, meta = rows(radar, chain, 8, seed=5)
     spec = simulate(radar, chain, rs, {n: ({"q": 6.0} if n == "antenna_pattern" else {}) for n in on})
-    path = cache_dir / f"fake_{'_'.join(on) or 'none'}.h5"
+    turn = float((world_cfg.get("scene") or {}).get("facet_turn", 0.0))
+    if turn:  # another facet layout: the same scene with other fine structure
+        spec = np.clip(spec + 0.05 * np.random.default_rng(1).standard_normal(spec.shape), 0.0, 1.0).astype(np.float32)
+    path = cache_dir / f"fake_{'_'.join(on) or 'none'}{'_turned' if turn else ''}.h5"
     cache_dir.mkdir(parents=True, exist_ok=True)
     with open_writer(path, classes=["g0", "g1", "g2", "g3"], radar=radar, chain=chain, skeleton_rate_hz=100.0,
                      n_steps=rs.skeletons.shape[1], config_hash="fake") as w:
@@ -71,7 +101,7 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
         "sim": {"_target_": "handradar.sim.simulator.Simulator", "_partial_": True, "effects": [], "effect_params": {}},
         "diagnose": {"candidates": ["antenna_pattern", "palm"], "radarweightnet": False, "n_boot": 300, "greedy_max": 1},
         "benchmark": {"enabled": True, "builder": "tests.gap.test_benchmark.fake_world",
-                      "cases": ["antenna_pattern", "nothing"], "world": {"subjects": 1},
+                      "cases": ["antenna_pattern", "nothing"], "world": {"subjects": 1}, "layout_turn": 0.5,
                       "state_dir": str(tmp_path / "state"), "figures_dir": str(tmp_path / "docs" / "figures"),
                       "results_md": str(tmp_path / "docs" / "gap_benchmark.md")}})
     CALLS.clear()
@@ -83,8 +113,11 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
     assert out["scores"]["effects_correct"] == 1 and out["scores"]["controls_correct"] == 1
     assert "| antenna_pattern | antenna_pattern | antenna_pattern | yes |" in md.read_text()
     assert (tmp_path / "run" / "cases" / "antenna_pattern" / "gap_report.json").is_file()
-    assert len(CALLS) == 3 and all(c["subjects"] == 1 for c in CALLS)  # 2 cases + the effect-free world once
+    # 2 cases + the effect-free world once, + the oracle's turned worlds (antenna_pattern, effect-free)
+    assert len(CALLS) == 5 and all(c["subjects"] == 1 for c in CALLS)
+    assert sum(c.get("scene", {}).get("facet_turn") == 0.5 for c in CALLS) == 2
     assert by["nothing"]["signature_mean"] < 1e-6 < by["antenna_pattern"]["signature_mean"]
+    assert by["antenna_pattern"]["oracle_ci95"][0] > 0 and by["nothing"].get("oracle_gap_closed") is None
     CALLS.clear()
     md.write_text(md.read_text() + "hand-written analysis\n")
     run_benchmark(cfg, tmp_path / "run2")  # every case resumes from the state folder: no world is built

@@ -165,3 +165,38 @@ def test_surfaces_follow_the_effects(world):
     down, up = palm & (n[0, :, 2] < -0.9), palm & (n[0, :, 2] > 0.9)
     assert down.sum() > 10 and up.sum() > 10
     assert c[0, down, 2].mean() < c[0, up, 2].mean() - 0.015
+
+
+def test_facet_turn_keeps_the_shape_and_moves_the_facets(world):
+    """scene.facet_turn rotates every cylinder's facets about its axis: the same surface area per
+    part and the same bone axes, other facet centroids; a whole side's turn gives the same facets back."""
+    rng = np.random.default_rng(0)
+    subj = Subject.sample(0, rng, world.kinematics, world.scene.finger_radius_m)
+    pose = Motion("grasp", subj, 0.0, 1.8, world.kinematics, rng).pose(np.array([0.0, 0.1]))
+
+    def facets(turn):
+        surf = build_surfaces(pose, world.effects, dataclasses.replace(world.scene, facet_turn=turn))
+        c, _, area = facet_geometry(surf.triangles)
+        return surf, c, area
+
+    base, c0, a0 = facets(0.0)
+    half, c1, a1 = facets(0.5)
+    whole, c2, _ = facets(1.0)
+    k = base.part == base.part_names.index("palm")  # the palm's fan apex moves: same slab, other facets
+    assert a1[:, k].sum(1) == pytest.approx(a0[:, k].sum(1), rel=1e-9)
+    assert np.abs(c1[:, k] - c0[:, k]).max() > 1e-3
+    for name in ("index_proximal", "forearm"):
+        k = base.part == base.part_names.index(name)
+        assert a1[:, k].sum(1) == pytest.approx(a0[:, k].sum(1), rel=1e-9)  # the same area
+        assert c1[:, k].mean(1) == pytest.approx(c0[:, k].mean(1), abs=1e-9)  # the same axis
+        assert np.abs(c1[:, k] - c0[:, k]).max() > 1e-3  # other facets
+        # one whole side: the same set of centroids, shifted by one facet index
+        d = np.linalg.norm(c2[0, k][:, None] - c0[0, k][None], axis=-1)
+        assert d.min(1).max() < 1e-9
+
+
+def test_facet_turn_is_part_of_the_world_cache_key(world, radar, chain, tmp_path):
+    from handradar.world.generate import dataset_path
+
+    turned = dataclasses.replace(world, scene=dataclasses.replace(world.scene, facet_turn=0.5))
+    assert dataset_path(world, radar, chain, tmp_path) != dataset_path(turned, radar, chain, tmp_path)

@@ -215,6 +215,11 @@ class Scene:
     palm_subdivisions: int = 1
     forearm_sides: int = 8
     forearm_rings: int = 3
+    # another facet layout of the same surfaces: every cylinder's facets (fingers, forearm) turned about
+    # its axis by this fraction of a side, the apex of the palm's triangle fan moved around a 1 cm circle.
+    # Each facet centroid is an independent scatterer, so the spectrogram's fine structure (speckle)
+    # depends on the layout; a second layout (0.5) measures how much does
+    facet_turn: float = 0.0
     finger_radius_m: float = 0.0085  # at the MCP, for hand scale 1; tapers to 75 % at the tip
     skin_diffuse: float = 0.3  # diffuse RCS per unit area (m^2 / m^2) at normal incidence
     skin_specular: float = 1.0  # glossy lobe RCS per unit area at normal incidence

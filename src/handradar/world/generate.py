@@ -207,6 +207,8 @@ def dataset_path(world: Any, radar: RadarConfig, chain: ChainConfig, cache_dir: 
     """Cache file of the world's dataset and its config hash (radar, chain, world physics, generator version)."""
     world = world_config(world)
     physics = {k: v for k, v in world.to_dict().items() if k != "workers"}  # workers do not change the data
+    if physics["scene"]["facet_turn"] == 0.0:  # added later: at its default the data is unchanged, so are the keys
+        del physics["scene"]["facet_turn"]
     h = config_hash(physics, capture_radar(radar, world), chain, WORLD_VERSION, "fast-path")
     return Path(cache_dir) / f"world_{h}.h5", h
 

@@ -48,13 +48,14 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 def frustum(a: np.ndarray, b: np.ndarray, up: np.ndarray, r0: float, r1: float, sides: int, rings: int,
-            cap_end: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Tapered cylinder from a to b (T, 3): vertices (T, V, 3) and faces (F, 3); ``up`` fixes the seam."""
+            cap_end: bool = False, turn: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Tapered cylinder from a to b (T, 3): vertices (T, V, 3) and faces (F, 3); ``up`` fixes the seam,
+    ``turn`` rotates the facets about the axis by that fraction of one side (same shape, other facets)."""
     e = _unit(b - a)
     u = _unit(up - (up * e).sum(-1, keepdims=True) * e)
     v = np.cross(e, u)
     length = np.linalg.norm(b - a, axis=-1, keepdims=True)
-    phi = 2 * np.pi * (np.arange(sides) + 0.5) / sides
+    phi = 2 * np.pi * (np.arange(sides) + 0.5 + turn) / sides
     verts = []
     for i in range(rings + 1):
         z = i / rings
@@ -92,10 +93,18 @@ def _subdivide(tri: np.ndarray, levels: int) -> np.ndarray:
     return tri
 
 
-def palm_template(scale: float, thickness_m: float, subdivisions: int, left: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Palm slab in hand-local coordinates: vertices (V, 3), faces (F, 3) (a triangle soup)."""
+_PALM_APEX_CIRCLE_M = 0.01  # facet_turn moves the apex of the palm's triangle fan around a circle this big (scale 1)
+
+
+def palm_template(scale: float, thickness_m: float, subdivisions: int, left: bool,
+                  turn: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Palm slab in hand-local coordinates: vertices (V, 3), faces (F, 3) (a triangle soup).
+
+    The faces are a fan from an apex inside the outline; ``turn`` (scene.facet_turn) moves the apex
+    around a circle through the outline's mean, which keeps the slab and moves every facet."""
     outline = _PALM_OUTLINE * scale
-    centre = outline.mean(0)
+    a = 2 * np.pi * turn
+    centre = outline.mean(0) + _PALM_APEX_CIRCLE_M * scale * np.array([np.cos(a) - 1.0, np.sin(a)])
     fan = np.stack([np.broadcast_to(centre, outline.shape), outline, np.roll(outline, -1, 0)], 1)
     tris2d = _subdivide(fan, subdivisions)
     h = thickness_m / 2
@@ -165,17 +174,19 @@ def build_surfaces(pose: Pose, effects: Effects, scene: Scene) -> Surfaces:
                 r0 = r_base * (1 - 0.25 * pos / 3)
                 r1 = r_base * (1 - 0.25 * (pos + 1) / 3)
             tip = b in (4, 8, 12, 16, 20)
-            v, f = frustum(j[:, a], j[:, b], dorsal, r0, r1, scene.finger_sides, scene.finger_rings, cap_end=tip)
+            v, f = frustum(j[:, a], j[:, b], dorsal, r0, r1, scene.finger_sides, scene.finger_rings, cap_end=tip,
+                           turn=scene.facet_turn)
             add(v, f, bname, s)
         if effects.palm.enabled:
-            pv, pf = palm_template(geom.scale, effects.palm.thickness_m, scene.palm_subdivisions, left=s == 1)
+            pv, pf = palm_template(geom.scale, effects.palm.thickness_m, scene.palm_subdivisions, left=s == 1,
+                                   turn=scene.facet_turn)
             v = j[:, 0][:, None, :] + np.einsum("tij,vj->tvi", rot, pv)
             add(v, pf, "palm", s)
         if effects.forearm.enabled:
             elbow = np.broadcast_to(pose.elbows[s], j[:, 0].shape)
             fa = effects.forearm
             v, f = frustum(elbow, j[:, 0], dorsal, fa.radius_elbow_m * geom.scale, fa.radius_wrist_m * geom.scale,
-                           scene.forearm_sides, scene.forearm_rings)
+                           scene.forearm_sides, scene.forearm_rings, turn=scene.facet_turn)
             add(v, f, "forearm", s)
     return Surfaces(np.concatenate(verts, 1), np.concatenate(faces), np.concatenate(part),
                     np.concatenate(slot), names)
