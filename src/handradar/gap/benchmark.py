@@ -199,7 +199,8 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "(mean / median): how visible the withheld effect is in the radar data at all. `world at another facet "
              "layout` is the gap_closed [95 % CI] of the world's own physics used as the simulator: the same worlds "
-             "with their cylinder facets turned by half a side, without and with exactly the withheld effect "
+             "with their facets laid out differently (cylinders turned by half a side, the palm's fan apex moved), "
+             "without and with exactly the withheld effect "
              "(handradar.gap.benchmark.layout_oracle; - where the effect leaves the radar data unchanged). Near or "
              "below 0, the effect's signature is facet speckle that no simulator without the world's facet layout "
              "can reproduce.", "",
@@ -246,6 +247,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     sim_cfg = OmegaConf.to_container(cfg.sim, resolve=True)
     state = Path(bench.state_dir)
     turn = bench.get("layout_turn")  # the other facet layout of the oracle column (null: no oracle)
+    world_cache = Path(cfg.paths.cache_dir) / "world"
+    clean_cfg = case_world(world, Case(CONTROL_NOTHING, (), "none"))
     results: list[dict] = []
     t_start = time.perf_counter()
     seed = diag_cfg.get("seed", 0)
@@ -262,10 +265,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                 log.info("case %s: resumed from %s", case.name, done)
                 continue
             t0 = time.perf_counter()
-            path = build_world(wcfg, radar, chain, Path(cfg.paths.cache_dir) / "world")
-            if clean is None:
-                clean = build_world(case_world(world, Case(CONTROL_NOTHING, (), "none")), radar, chain,
-                                    Path(cfg.paths.cache_dir) / "world")
+            path = build_world(wcfg, radar, chain, world_cache)
+            clean = clean or build_world(clean_cfg, radar, chain, world_cache)
             data = load_dataset(path)
             diagnosis = diagnose(data, sim_builder(cfg.sim, data.radar, data.chain), baseline_effects(cfg.sim),
                                  diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
@@ -274,10 +275,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             res = {**_case_result(case, diagnosis.report, time.perf_counter() - t0, len(data)),
                    **radar_signature(path, clean)}
             if turn is not None and res["signature_mean"] > 0:  # skeleton-side effects leave the radar untouched
-                clean_turned = clean_turned or build_world(turned(case_world(world, Case(CONTROL_NOTHING, (), "none")), turn),
-                                                           radar, chain, Path(cfg.paths.cache_dir) / "world")
-                res.update(layout_oracle(path, clean_turned, build_world(turned(wcfg, turn), radar, chain,
-                                                                         Path(cfg.paths.cache_dir) / "world"),
+                clean_turned = clean_turned or build_world(turned(clean_cfg, turn), radar, chain, world_cache)
+                res.update(layout_oracle(path, clean_turned, build_world(turned(wcfg, turn), radar, chain, world_cache),
                                          n_boot=int(diag_cfg.get("n_boot", 2000)), seed=seed))
                 res["seconds"] = time.perf_counter() - t0
             atomic_write_text(done, json.dumps(res, indent=1) + "\n")
