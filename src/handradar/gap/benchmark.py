@@ -94,7 +94,8 @@ def case_world(world: Mapping | None, case: Case, strengths: Mapping | None = No
 
 
 def turned(world: Mapping, turn: float) -> dict:
-    """A case's world config with its cylinder facets turned by ``turn`` sides (scene.facet_turn)."""
+    """A case's world config at another facet layout (scene.facet_turn = ``turn``: cylinders turned by
+    that fraction of a side, the palm's fan apex moved)."""
     w = copy.deepcopy(dict(world))
     w["scene"] = {**dict(w.get("scene") or {}), "facet_turn": float(turn)}
     return w
