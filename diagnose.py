@@ -1,9 +1,11 @@
 """Sim-to-real gap diagnosis: ``python diagnose.py data.root=DIR [sim.effects=[noise]]``.
 
-Thin Hydra entry point (config conf/diagnose.yaml); the job is :func:`handradar.gap.app.run`.
-Writes gap_report.json (DESIGN section 8), gap_report.md and figures into the run folder and logs
-an MLflow run; the last line printed is the report's path. ``+experiment=gap_benchmark`` runs the
-withheld-effect benchmark instead (its last line: the results markdown).
+Thin Hydra entry point (config conf/diagnose.yaml); the job is ``cfg.job``:
+:func:`handradar.gap.job.run` by default, :func:`handradar.gap.benchmark.run` with
+``+experiment=gap_benchmark``.
+A diagnosis writes gap_report.json (docs/architecture.md, "Gap report"), gap_report.md and figures
+into the run folder and logs an MLflow run; the last line printed is the report's path (the
+benchmark's: its results markdown).
 """
 
 from __future__ import annotations
@@ -16,10 +18,11 @@ import handradar.config  # noqa: F401  (registers the ${hr_root:} resolver used 
 
 @hydra.main(config_path="conf", config_name="diagnose", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    from handradar.cli import run_job
-    from handradar.gap.app import run
+    from hydra.utils import get_method
 
-    run_job(run, cfg)
+    from handradar.cli import run_job
+
+    run_job(get_method(str(cfg.job)), cfg)
 
 
 if __name__ == "__main__":

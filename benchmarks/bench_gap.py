@@ -24,9 +24,9 @@ from omegaconf import OmegaConf
 
 from benchmarks.common import Result
 from handradar.data.ingest import ingest
-from handradar.gap.app import baseline_effects, sim_builder
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
+from handradar.gap.job import baseline_effects, sim_builder
 from handradar.provenance import REPO_ROOT
 
 N_RECORDINGS = 100
@@ -40,7 +40,9 @@ def recordings() -> Path:
     env = os.environ.get("HANDRADAR_BENCH_GAP_RECORDINGS")
     if env:
         return Path(env)
-    from handradar.world import write_world_recordings  # the reference world (DESIGN section 6)
+    from handradar.world import (
+        write_world_recordings,  # the reference world (DESIGN section 6)
+    )
 
     out = REPO_ROOT / ".cache" / "bench_gap" / "recordings"
     write_world_recordings(None, instantiate(_conf("radar/awr1843")), out, limit=N_RECORDINGS, progress=False)

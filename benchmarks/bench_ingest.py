@@ -16,15 +16,25 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import Result, best_time
-from handradar.data.ingest import ingest
 from handradar.data.examples import recording_example
-from handradar.data.recording import GESTURES, RecordingMeta, load_recording, read_meta, write_meta
-from handradar.hand.leap import leap_frames_from_sequence, read_leap_jsonl, write_leap_jsonl
+from handradar.data.ingest import ingest
+from handradar.data.recording import (
+    RecordingMeta,
+    load_recording,
+    read_meta,
+    write_meta,
+)
+from handradar.hand.leap import (
+    leap_frames_from_sequence,
+    read_leap_jsonl,
+    write_leap_jsonl,
+)
 from handradar.hand.skeleton import HandSequence
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.radar.dca1000 import read_adc, write_adc
 from handradar.radar.signal import beat_signal
+from handradar.vocab import GESTURES
 
 N_RECORDINGS = 20
 N_FRAMES = 24

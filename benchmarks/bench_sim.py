@@ -24,14 +24,15 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from benchmarks.common import Result, best_time
-from handradar.hand.features import FEATURE_NAMES, HandModelConfig, bone_features
-from handradar.models.losses import fast_ssim_loss
+from handradar.hand.model import HandModelConfig
+from handradar.metrics import fast_ssim_loss
 from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.provenance import REPO_ROOT
 from handradar.radar.chain import ChainConfig
 from handradar.sim.cache import pack
-from handradar.sim.demo import window
+from handradar.sim.features import FEATURE_NAMES, bone_features
 from handradar.sim.simulator import Simulator
+from tests.sim.demo import window
 
 BATCH = 64
 

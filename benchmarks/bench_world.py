@@ -13,7 +13,13 @@ from hydra.utils import instantiate
 
 from benchmarks.common import Result
 from handradar.config import VERSION_BASE, config_dir
-from handradar.world import build_world_dataset, fast_example, recording_specs, world_config, write_world_recordings
+from handradar.world import (
+    build_world_dataset,
+    fast_example,
+    recording_specs,
+    world_config,
+    write_world_recordings,
+)
 
 
 def _configs():

@@ -25,8 +25,8 @@ import numpy as np
 
 from handradar.atomic import atomic_write_text
 from handradar.provenance import REPO_ROOT
-from handradar.tasks.report import build_tables
-from handradar.tasks.tracking import TAG_PREFIX, Tracker, sqlite_path
+from handradar.runs.mlflow import TAG_PREFIX, Tracker, sqlite_path
+from handradar.runs.tables import build_tables
 
 DEFAULT_URI = f"sqlite:///{REPO_ROOT / 'logs' / 'mlflow' / 'mlflow.db'}"
 log = logging.getLogger(__name__)

@@ -11,7 +11,7 @@ import torch
 
 from handradar.data.datamodule import SpectrogramDataModule, stratified_split
 from handradar.data.hdf5 import open_writer, validate
-from handradar.data.recording import GESTURES
+from handradar.vocab import GESTURES
 
 COUNTS = {0: 40, 3: 20, 7: 10}  # uneven classes
 

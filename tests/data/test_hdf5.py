@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from handradar.data.hdf5 import open_writer, read_attrs, validate
 from handradar.data.ingest import ingest
-from handradar.data.recording import GESTURES
 from handradar.errors import FormatError
+from handradar.vocab import GESTURES
 from tests.data.writer import Scene, write_recording
 
 

@@ -15,9 +15,9 @@ import pytest
 import handradar.data.ingest as ingest_mod
 from handradar.data.hdf5 import read_attrs, read_meta_group, validate
 from handradar.data.ingest import ingest
-from handradar.data.recording import GESTURES
 from handradar.errors import FormatError
 from handradar.radar.chain import ChainConfig
+from handradar.vocab import GESTURES
 from tests.data.writer import Scene, expected_doppler_row, write_recording
 
 REPO = Path(__file__).resolve().parents[2]

@@ -20,7 +20,13 @@ from handradar.data.recording import (
     write_meta,
 )
 from handradar.errors import FormatError
-from tests.data.writer import LEAP_TO_RADAR, Scene, chirp_times, wavelength, write_recording
+from tests.data.writer import (
+    LEAP_TO_RADAR,
+    Scene,
+    chirp_times,
+    wavelength,
+    write_recording,
+)
 
 META = {"format": "handradar.recording/1", "gesture": "grasp", "subject": "s01", "angle_deg": 30, "hands": 1,
         "occlusion": True, "repetition": 2, "radar_start_us": 1200000, "leap_to_radar": LEAP_TO_RADAR}

@@ -7,8 +7,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from handradar.data.splits import (Split, default_train_values, few_shot_split, make_split, ood_split,
-                                   stratified_sample)
+from handradar.data.splits import (
+    Split,
+    default_train_values,
+    few_shot_split,
+    make_split,
+    ood_split,
+    stratified_sample,
+)
 
 N_CLASSES, PER_CLASS = 10, 24
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from experiments import tables
-from handradar.tasks.report import build_tables, job_table, mean_std, stats
-from handradar.tasks.tracking import Tracker
+from handradar.runs.mlflow import Tracker
+from handradar.runs.tables import build_tables, job_table, mean_std, stats
 
 
 def test_stats_and_cells():

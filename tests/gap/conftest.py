@@ -3,15 +3,13 @@ simulator itself (with an effect switched on, or with a distortion outside the e
 
 from __future__ import annotations
 
-
 import numpy as np
-import pytest
 import torch
 
 from handradar.gap.data import GapData
 from handradar.gap.engine import RowSet
-from handradar.sim.demo import window
 from handradar.sim.simulator import Simulator
+from tests.sim.demo import window
 
 
 def builder(radar, chain):

@@ -10,8 +10,15 @@ import pytest
 from omegaconf import OmegaConf
 
 from handradar.data.hdf5 import open_writer
-from handradar.gap.benchmark import case_world, cases, layout_oracle, run_benchmark, score, turned
-from handradar.sim.effects import EFFECT_NAMES
+from handradar.gap.benchmark import (
+    case_world,
+    cases,
+    layout_oracle,
+    run_benchmark,
+    score,
+    turned,
+)
+from handradar.vocab import EFFECTS as EFFECT_NAMES
 from tests.gap.conftest import rows, simulate
 
 CALLS: list[dict] = []
@@ -100,7 +107,7 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
         "paths": {"cache_dir": str(tmp_path / "cache")},
         "sim": {"_target_": "handradar.sim.simulator.Simulator", "_partial_": True, "effects": [], "effect_params": {}},
         "diagnose": {"candidates": ["antenna_pattern", "palm"], "radarweightnet": False, "n_boot": 300, "greedy_max": 1},
-        "benchmark": {"enabled": True, "builder": "tests.gap.test_benchmark.fake_world",
+        "benchmark": {"builder": "tests.gap.test_benchmark.fake_world",
                       "cases": ["antenna_pattern", "nothing"], "world": {"subjects": 1}, "layout_turn": 0.5,
                       "state_dir": str(tmp_path / "state"), "figures_dir": str(tmp_path / "docs" / "figures"),
                       "results_md": str(tmp_path / "docs" / "gap_benchmark.md")}})

@@ -15,8 +15,8 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from handradar.config import VERSION_BASE, config_dir
-from handradar.data.provision import WorldSource
-from handradar.gap.app import baseline_effects, sim_builder
+from handradar.data.datasets import WorldSource
+from handradar.gap.job import baseline_effects, sim_builder
 from handradar.gap.report import validate_report
 from tests.data.writer import Scene, write_recording
 
@@ -38,7 +38,7 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     b = _compose(["+experiment=gap_benchmark"])
     OmegaConf.resolve(b)  # every interpolation resolves (the run logs the resolved config)
     assert isinstance(instantiate(_compose(["data=world"]).data.source), WorldSource)
-    assert b.benchmark.enabled and b.sim.effects == [] and not b.diagnose.radarweightnet
+    assert b.job == "handradar.gap.benchmark.run" and b.sim.effects == [] and not b.diagnose.radarweightnet
     assert b.benchmark.builder == "handradar.world.build_world_dataset"
     assert len(b.benchmark.cases) == 10 and {"nothing", "iq_imbalance"} <= set(b.benchmark.cases)
     assert sim_builder(b.sim, radar, chain)({}).hand.sections == 10  # the preset's coarser visibility mesh

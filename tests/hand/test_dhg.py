@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from handradar.errors import FormatError
-from handradar.hand.importers.dhg import GESTURES_14, GESTURES_28, iter_dhg, read_dhg, read_info
+from handradar.hand.importers.dhg import (
+    GESTURES_14,
+    GESTURES_28,
+    iter_dhg,
+    read_dhg,
+    read_info,
+)
 from handradar.hand.placement import flexion_score
 from tests.hand.template import moving_hand, rotation
 

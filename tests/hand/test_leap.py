@@ -11,7 +11,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from handradar.errors import FormatError
-from handradar.hand.leap import leap_frames_from_sequence, read_leap_jsonl, write_leap_jsonl
+from handradar.hand.leap import (
+    leap_frames_from_sequence,
+    read_leap_jsonl,
+    write_leap_jsonl,
+)
 from handradar.hand.skeleton import HandSequence
 
 # Leap mm -> radar m: radar x = Leap x, radar y = -Leap z, radar z = Leap y (Leap's up is boresight),

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from handradar.hand.mesh import CylinderTemplate, bone_frames, bone_radii, bone_vertices, hand_mesh
+from handradar.hand.mesh import (
+    CylinderTemplate,
+    bone_frames,
+    bone_radii,
+    bone_vertices,
+    hand_mesh,
+)
 from handradar.hand.retarget import standard_hand
 
 

@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 import torch
 
-from handradar.hand.retarget import WRIST_TO_THUMB_CMC_M, retarget, standard_hand, standard_lengths
+from handradar.hand.retarget import (
+    WRIST_TO_THUMB_CMC_M,
+    retarget,
+    standard_hand,
+    standard_lengths,
+)
 from handradar.hand.skeleton import BONE_CHILD, BONE_PARENT, BONES
 
 

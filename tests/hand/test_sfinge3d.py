@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from handradar.errors import FormatError
-from handradar.hand.importers.sfinge3d import CLASSES, iter_sfinge3d, read_sfinge3d, sfinge3d_files
+from handradar.hand.importers.sfinge3d import (
+    CLASSES,
+    iter_sfinge3d,
+    read_sfinge3d,
+    sfinge3d_files,
+)
 from handradar.hand.placement import flexion_score
 from handradar.hand.skeleton import BONE_NAMES
 

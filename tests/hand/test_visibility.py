@@ -7,7 +7,12 @@ import pytest
 
 from handradar.hand.mesh import bone_radii, bone_vertices, default_template
 from handradar.hand.retarget import standard_hand
-from handradar.hand.visibility import _facing, embree_available, visibility, visibility_step
+from handradar.hand.visibility import (
+    _facing,
+    embree_available,
+    visibility,
+    visibility_step,
+)
 
 THUMB_DISTAL, PINKY_DISTAL = 2, 18  # leaf bones: joints 3 -> 4 and 19 -> 20
 

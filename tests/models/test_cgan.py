@@ -8,8 +8,8 @@ import pytest
 import torch
 
 from handradar.models.cgan import Discriminator, Generator
-from handradar.tasks.fitting import StepSeed, tensor_loader
 from handradar.tasks.gan import CGANModule, sample_per_class
+from handradar.training import StepSeed, tensor_loader
 from tests.tasks.fakes import class_pattern
 
 

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import copy
+
 import numpy as np
 import pytest
 import torch
 from torch import nn
 
-from handradar.models.classifiers import backbone_state, replace_head, resnet18, resnet50
+from handradar.models.classifiers import (
+    backbone_state,
+    replace_head,
+    resnet18,
+    resnet50,
+)
 from handradar.tasks.classify import evaluate, recompute_bn_stats
 from tests.tasks.fakes import class_pattern
 

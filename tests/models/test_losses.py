@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from handradar.models.losses import ssim, ssim_loss
+from handradar.metrics import ssim, ssim_loss
 
 
 def test_identical_spectrograms_have_ssim_one():
@@ -42,7 +42,7 @@ def test_gradcheck():
 
 
 def test_fast_ssim_loss_equals_ssim_loss():
-    from handradar.models.losses import fast_ssim_loss
+    from handradar.metrics import fast_ssim_loss
 
     x = torch.rand(3, 64, 32, dtype=torch.float64, requires_grad=True)
     y = torch.rand(3, 64, 32, dtype=torch.float64)

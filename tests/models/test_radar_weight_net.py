@@ -6,13 +6,19 @@ import numpy as np
 import pytest
 import torch
 
-from handradar.hand.features import HandModelConfig, bone_features
-from handradar.models.losses import ssim_loss
-from handradar.models.radar_weight_net import RadarWeightNet, enhanced_spectrogram, normalise_features, upsample_weights
+from handradar.hand.model import HandModelConfig
+from handradar.metrics import ssim_loss
+from handradar.models.radar_weight_net import (
+    RadarWeightNet,
+    enhanced_spectrogram,
+    normalise_features,
+    upsample_weights,
+)
+from handradar.sim.features import bone_features
+from handradar.sim.profiles import scatterer_profiles, window_chirp_times
 from handradar.sim.scatterers import Scatterers
 from handradar.sim.simulator import Simulator
-from handradar.sim.synthesis import scatterer_profiles, window_chirp_times
-from handradar.sim.demo import window
+from tests.sim.demo import window
 
 
 def steps(radar, chain, rate=100.0):

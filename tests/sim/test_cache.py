@@ -10,7 +10,7 @@ import handradar.sim.cache as cache_mod
 from handradar.errors import FormatError
 from handradar.sim.cache import SlotProfileCache, cache_slot_profiles, pack, unpack
 from handradar.sim.simulator import Simulator
-from handradar.sim.demo import window
+from tests.sim.demo import window
 
 
 def _data(radar, chain, n=3):
@@ -80,7 +80,7 @@ def test_rejects_a_foreign_file(tmp_path):
 
 def test_cache_dataset_builds_both_caches(radar, short_chain, tmp_path):
     from handradar.data.hdf5 import open_writer
-    from handradar.hand.features import HandModelConfig
+    from handradar.hand.model import HandModelConfig
     from handradar.sim.cache import cache_dataset
 
     sk, mk = _data(radar, short_chain, n=2)

@@ -8,8 +8,8 @@ from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 
 from handradar.config import VERSION_BASE
-from handradar.hand.features import HandModelConfig
-from handradar.sim.effects import EFFECT_NAMES
+from handradar.hand.model import HandModelConfig
+from handradar.vocab import EFFECTS as EFFECT_NAMES
 from handradar.sim.simulator import Simulator
 from tests.conftest import REPO
 

@@ -14,10 +14,10 @@ from handradar.radar.chain import range_profiles_from_adc, spectrogram_from_prof
 from handradar.radar.signal import beat_signal
 from handradar.sim.cache import pack
 from handradar.sim.interp import interpolate_time, upsample_to_chirps
+from handradar.sim.profiles import combine_slots, scatterer_profiles, window_chirp_times
 from handradar.sim.scatterers import Scatterers, radar_amplitude
 from handradar.sim.simulator import Simulator
-from handradar.sim.synthesis import combine_slots, scatterer_profiles, window_chirp_times
-from handradar.sim.demo import window
+from tests.sim.demo import window
 
 AMP = dict(tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5)
 

@@ -11,17 +11,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import h5py
-import pytest
 import numpy as np
-import torch
+import pytest
 from lightning.pytorch.callbacks import Callback
 from torch import nn
 
 from handradar.data.hdf5 import open_writer
-from handradar.data.recording import GESTURES
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
+from handradar.vocab import GESTURES
 
 N_STEPS = 4
 DEFAULT_CFG = """channelCfg 1 1 0

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handradar.errors import FormatError, HandradarError
-from handradar.tasks.train import Job, run
+from handradar.errors import FormatError
+from handradar.tasks.train import run
 from tests.tasks import fakes
 from tests.tasks.fakes import compose_train, fake_overrides
 

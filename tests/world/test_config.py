@@ -11,7 +11,8 @@ from hydra.utils import instantiate
 from handradar.config import VERSION_BASE, config_dir
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
-from handradar.world.config import EFFECTS, VOCABULARY, WorldConfig, world_config
+from handradar.vocab import EFFECTS as VOCABULARY
+from handradar.world.config import EFFECTS, WorldConfig, world_config
 
 
 def _compose(*overrides: str):

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from handradar.data.recording import GESTURES
 from handradar.hand.skeleton import BONE_CHILD, BONE_PARENT
+from handradar.vocab import GESTURES
 from handradar.world.generate import subject
 from handradar.world.kinematics import GESTURE_TABLE, Motion, Subject
 

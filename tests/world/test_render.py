@@ -14,7 +14,12 @@ from handradar.radar.dca1000 import quantise
 from handradar.radar.signal import beat_signal
 from handradar.world.config import Effects, IQImbalance
 from handradar.world.generate import RecordingSpec, simulate, simulate_adc
-from handradar.world.render import adc_cube, fast_profiles, iq_coefficients, synthesize_beat
+from handradar.world.render import (
+    adc_cube,
+    fast_profiles,
+    iq_coefficients,
+    synthesize_beat,
+)
 from handradar.world.scene import DIRECT, ScatterTracks
 from tests.world.conftest import range_doppler, with_effects
 

@@ -16,7 +16,7 @@ def main(cfg: DictConfig) -> None:
     from hydra.utils import instantiate
 
     from handradar.errors import HandradarError
-    from handradar.tasks.synthetic import synthesize_source
+    from handradar.synthesis.providers import synthesize_source
 
     out = Path(cfg.out).resolve()
     skipped: list | None = None if cfg.synth.strict else []

@@ -12,10 +12,11 @@ from tqdm.auto import tqdm
 
 from handradar.data.examples import recording_example, skeleton_steps
 from handradar.data.hdf5 import open_writer
-from handradar.data.recording import GESTURES, find_recordings, load_recording
+from handradar.data.recording import find_recordings, load_recording
 from handradar.errors import FormatError, HandradarError
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
+from handradar.vocab import GESTURES
 
 log = logging.getLogger(__name__)
 

@@ -20,12 +20,9 @@ from handradar.hand.leap import finite_number, leap_matrix, read_leap_jsonl
 from handradar.hand.skeleton import HandSequence
 from handradar.radar.config import RadarConfig
 from handradar.radar.dca1000 import read_adc
+from handradar.vocab import GESTURES
 
 FORMAT = "handradar.recording/1"
-GESTURES = (
-    "grasp", "finger_friction", "finger_wave", "circle", "slide", "finger_cross",
-    "double_hand_clap", "double_hand_drumming", "hand_merge", "double_hand_circle",
-)
 FILES = ("radar.cfg", "adc_data.bin", "leap.jsonl", "meta.json")
 META_FIELDS = ("gesture", "subject", "angle_deg", "hands", "occlusion", "repetition")
 

@@ -47,8 +47,20 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_write_text
+from handradar.gap.data import load_dataset
+from handradar.gap.diagnosis import diagnose
+from handradar.gap.job import (
+    baseline_effects,
+    headline_metrics,
+    sim_builder,
+    write_outputs,
+)
+from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import code_version, config_hash
-from handradar.sim.effects import EFFECT_NAMES
+from handradar.runs.hydra import output_dir
+from handradar.runs.mlflow import Tracker, tracked_run
+from handradar.viz.gap import confusion_figure
+from handradar.vocab import EFFECTS
 
 log = logging.getLogger(__name__)
 
@@ -67,14 +79,14 @@ class Case:
 def cases(names: Sequence[str]) -> list[Case]:
     out = []
     for n in names:
-        if n in EFFECT_NAMES:
+        if n in EFFECTS:
             out.append(Case(n, (n,), n))
         elif n == CONTROL_NOTHING:
             out.append(Case(n, (), "none"))
         elif n == CONTROL_OUTSIDE:
             out.append(Case(n, (CONTROL_OUTSIDE,), "none"))
         else:
-            raise ValueError(f"benchmark case {n!r}: expected one of {list(EFFECT_NAMES)}, "
+            raise ValueError(f"benchmark case {n!r}: expected one of {list(EFFECTS)}, "
                              f"{CONTROL_NOTHING!r} or {CONTROL_OUTSIDE!r}")
     return out
 
@@ -86,7 +98,7 @@ def case_world(world: Mapping | None, case: Case, strengths: Mapping | None = No
     w = copy.deepcopy(dict(world or {}))
     effects = dict(w.get("effects") or {})
     strengths = dict(strengths or {})
-    for name in (*EFFECT_NAMES, CONTROL_OUTSIDE):
+    for name in (*EFFECTS, CONTROL_OUTSIDE):
         own = dict(strengths.get(name) or {}) if name in case.on else {}
         effects[name] = {**dict(effects.get(name) or {}), **own, "enabled": name in case.on}
     w["effects"] = effects
@@ -103,7 +115,7 @@ def turned(world: Mapping, turn: float) -> dict:
 
 def score(results: Sequence[Mapping]) -> dict:
     """Confusion matrix (cases x attributions), top-1 correct count, mean gap_closed of the withheld effects."""
-    labels = [*EFFECT_NAMES, "none"]
+    labels = [*EFFECTS, "none"]
     rows = [r["case"] for r in results]
     matrix = np.zeros((len(rows), len(labels)), dtype=int)
     for i, r in enumerate(results):
@@ -141,7 +153,6 @@ def radar_signature(case_path: str | Path, clean_path: str | Path) -> dict:
     the diagnosis never sees it. Effects on the skeleton side (tracking_jitter, sync_offset) leave the
     radar data unchanged and show 0 here.
     """
-    from handradar.gap.stats import per_example_ssim
 
     x, y = _paired(case_path, clean_path)
     d = 1.0 - per_example_ssim(y, x)
@@ -159,7 +170,6 @@ def layout_oracle(case_path: str | Path, clean_turned: str | Path, case_turned: 
     closes nothing here, and no simulator that lacks the world's facet layout can be credited with it.
     Truth-side context, never seen by the diagnosis.
     """
-    from handradar.gap.stats import bootstrap_gap_closed, per_example_ssim
 
     measured, before, after = _paired(case_path, clean_turned, case_turned)
     b = bootstrap_gap_closed(per_example_ssim(measured, before), per_example_ssim(measured, after),
@@ -233,10 +243,6 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     """Every case: build the world's dataset, diagnose it, score; write the figure, table and JSON."""
     from hydra.utils import get_method
 
-    from handradar.gap.app import baseline_effects, headline_metrics, sim_builder, tracked, write_outputs
-    from handradar.gap.data import load_dataset
-    from handradar.gap.diagnosis import diagnose
-    from handradar.viz.gap import confusion_figure
 
     bench = cfg.benchmark
     out = Path(out_dir)
@@ -254,7 +260,9 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     t_start = time.perf_counter()
     seed = diag_cfg.get("seed", 0)
     tags = {"preset": cfg.task_name, "seed": seed, "code_version": code_version(), "run_dir": out}
-    with tracked(cfg, tags, f"{cfg.task_name}-seed{seed}") as tracker:
+    tracker = instantiate(cfg.logger) if cfg.get("logger") else Tracker("", "", enabled=False)
+    with tracked_run(tracker, run_name=f"{cfg.task_name}-seed{seed}", tags=tags,
+                     config=OmegaConf.to_container(cfg, resolve=True)):
         clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
         clean_turned: Path | None = None  # ... and at the other facet layout (the oracle column)
         for case in cases(list(bench.cases)):
@@ -283,9 +291,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             atomic_write_text(done, json.dumps(res, indent=1) + "\n")
             results.append(res)
             log.info("case %s: truth %s, cause %s (%.0f s)", case.name, case.truth, res["cause"], res["seconds"])
-            if tracker is not None:
-                tracker.log_metrics({f"bench/{case.name}/{k.split('/', 1)[1]}": v
-                                     for k, v in headline_metrics(diagnosis.report).items()})
+            tracker.log_metrics({f"bench/{case.name}/{k.split('/', 1)[1]}": v
+                                 for k, v in headline_metrics(diagnosis.report).items()})
         scores = score(results)
         figures_dir, md_path = Path(bench.figures_dir), Path(bench.results_md)
         fig = confusion_figure(np.asarray(scores["matrix"]), [f"{r['case']} ({r['truth']})" for r in results],
@@ -312,11 +319,19 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         atomic_write_text(md_path, results_markdown(results, scores, rel_s, settings) + "\n" + (notes or NOTES_MARKER + "\n"))
         atomic_write_text(out / "benchmark.json", json.dumps({"results": results, "scores": scores,
                                                               "settings": settings}, indent=1) + "\n")
-        if tracker is not None:
-            tracker.log_metrics({"bench/effects_correct": scores["effects_correct"],
-                                 "bench/controls_correct": scores["controls_correct"],
-                                 "bench/mean_true_gap_closed": scores["mean_true_gap_closed"] or 0.0,
-                                 "bench/wall_s": time.perf_counter() - t_start})
-            tracker.log_artifact(fig, "figures")
-            tracker.log_artifact(md_path)
+        tracker.log_metrics({"bench/effects_correct": scores["effects_correct"],
+                             "bench/controls_correct": scores["controls_correct"],
+                             "bench/mean_true_gap_closed": scores["mean_true_gap_closed"] or 0.0,
+                             "bench/wall_s": time.perf_counter() - t_start})
+        tracker.log_artifact(fig, "figures")
+        tracker.log_artifact(md_path)
     return md_path
+
+
+def run(cfg: DictConfig) -> Path:
+    """The benchmark job (``python diagnose.py +experiment=gap_benchmark``): the results markdown's path."""
+    import torch
+
+    if cfg.get("threads"):
+        torch.set_num_threads(int(cfg.threads))
+    return run_benchmark(cfg, output_dir())

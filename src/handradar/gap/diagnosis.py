@@ -47,17 +47,31 @@ from tqdm.auto import tqdm
 
 from handradar.gap.data import GapData, stratified_split
 from handradar.gap.engine import SimBuilder, Variant, VariantEngine, merge
-from handradar.gap.fit import GridFit, calibrate_rcs_exponent, effect_grid, grid_fit, refine, with_settings
+from handradar.gap.fit import (
+    GridFit,
+    calibrate_rcs_exponent,
+    effect_grid,
+    grid_fit,
+    refine,
+    with_settings,
+)
 from handradar.gap.report import FACTORS, FORMAT
-from handradar.gap.stats import (
+from handradar.gap.where import (
+    BoneResiduals,
+    by_factor,
+    residual_profiles,
+    signature_correlation,
+    slot_power,
+)
+from handradar.metrics import (
     bootstrap_difference,
     bootstrap_gap_closed,
     gap_closed,
     per_example_mse,
     per_example_ssim,
 )
-from handradar.gap.where import BoneResiduals, by_factor, residual_profiles, signature_correlation, slot_power
-from handradar.sim.effects import EFFECT_NAMES, REGISTRY
+from handradar.sim.effects import REGISTRY
+from handradar.vocab import EFFECTS
 
 log = logging.getLogger(__name__)
 
@@ -247,7 +261,7 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
     unknown = [n for n in (cfg.candidates or []) if n not in REGISTRY]
     if unknown:
         raise ValueError(f"unknown candidate effect(s) {unknown}; expected some of {sorted(REGISTRY)}")
-    order = list(EFFECT_NAMES) + sorted(set(REGISTRY) - set(EFFECT_NAMES))
+    order = list(EFFECTS) + sorted(set(REGISTRY) - set(EFFECTS))
     names = [n for n in order if n not in base and (cfg.candidates is None or n in cfg.candidates)]
     cal, ev = stratified_split(data.labels, cfg.calibration_fraction, cfg.seed)
     if len(ev) < 20:
@@ -273,7 +287,7 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
     try:
         features = None
         if "occlusion" in names or "occlusion" in base or cfg.radarweightnet:
-            from handradar.hand.features import cached_bone_features
+            from handradar.sim.features import cached_bone_features
 
             features = cached_bone_features(data.rows.skeletons, data.rows.times, data.rows.masks,
                                             data.radar.wavelength_m, base_sim.hand, cache_dir, progress=progress)

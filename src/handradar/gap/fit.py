@@ -25,8 +25,7 @@ import numpy as np
 import torch
 
 from handradar.gap.engine import RowSet, SimBuilder, VariantEngine, merge
-from handradar.gap.stats import per_example_ssim
-from handradar.models.losses import fast_ssim_loss
+from handradar.metrics import fast_ssim_loss, per_example_ssim
 from handradar.sim.effects import REGISTRY
 
 

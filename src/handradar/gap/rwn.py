@@ -26,8 +26,13 @@ import torch
 from tqdm.auto import tqdm
 
 from handradar.gap.engine import merge
-from handradar.gap.stats import bootstrap_difference, bootstrap_gap_closed, per_example_mse, per_example_ssim
-from handradar.models.losses import fast_ssim_loss
+from handradar.metrics import (
+    bootstrap_difference,
+    bootstrap_gap_closed,
+    fast_ssim_loss,
+    per_example_mse,
+    per_example_ssim,
+)
 from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.sim.scatterers import N_SLOTS, radar_amplitude
 

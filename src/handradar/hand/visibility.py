@@ -41,7 +41,13 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from handradar.hand.mesh import CylinderTemplate, bone_frames, bone_radii, bone_vertices, default_template
+from handradar.hand.mesh import (
+    CylinderTemplate,
+    bone_frames,
+    bone_radii,
+    bone_vertices,
+    default_template,
+)
 from handradar.hand.skeleton import N_BONES
 
 RAY_OFFSET_M = 1e-5  # start rays this far from the vertex, off its own surface
@@ -49,8 +55,8 @@ RAY_OFFSET_M = 1e-5  # start rays this far from the vertex, off its own surface
 
 def embree_available() -> bool:
     try:
-        from trimesh.ray import ray_pyembree  # noqa: F401
         import embreex  # noqa: F401
+        from trimesh.ray import ray_pyembree  # noqa: F401
     except ImportError:
         return False
     return True

@@ -1,7 +1,7 @@
 """RadarWeightNet (Tang et al.): an LSTM over time plus three fully connected layers that turns
 per-bone motion features into one positive weight per reflection point and time step.
 
-Input: the features of handradar.hand.features (B, T, 2, 19, 5) for the 19 bones x 2 hands,
+Input: the features of handradar.sim.features (B, T, 2, 19, 5) for the 19 bones x 2 hands,
 normalised by fixed physical scales (:func:`normalise_features`) and zeroed for untracked hands,
 plus the two hand-mask flags: 38 x 5 + 2 = 192 values per step. Output: (B, T, 38) weights,
 softplus-positive, slot = hand * 19 + bone (the simulator's slots), initialised near 1 (the
@@ -25,8 +25,8 @@ import math
 import torch
 from torch import nn
 
-from handradar.hand.features import FEATURE_NAMES, N_FEATURES
 from handradar.hand.skeleton import N_BONES
+from handradar.sim.features import FEATURE_NAMES, N_FEATURES
 from handradar.sim.interp import upsample_to_chirps
 
 N_SLOTS = 2 * N_BONES

@@ -15,7 +15,7 @@ Modules (each documents its public API, shapes and units):
 - ``cache``      float16 cache of the per-slot profiles (HDF5, config-hash named, atomic).
 - ``demo``       synthetic flexing-hand windows for examples, tests and benchmarks.
 
-Typical use (RadarWeightNet in handradar.models.radar_weight_net, features in handradar.hand.features):
+Typical use (RadarWeightNet in handradar.models.radar_weight_net, features in handradar.sim.features):
 
     sim = Simulator(radar, chain, effects=["noise"])
     spec = sim(skeleton, mask)                                 # the modelling-only simulator

@@ -39,8 +39,8 @@ import torch
 from handradar.atomic import atomic_path
 from handradar.data.hdf5 import read_attrs, read_rows
 from handradar.errors import FormatError
-from handradar.hand.features import BoneFeatures, _digest, cached_bone_features
 from handradar.provenance import config_hash
+from handradar.sim.features import BoneFeatures, _digest, cached_bone_features
 from handradar.sim.scatterers import N_SLOTS
 
 CACHE_FORMAT = "handradar.slot_profiles/1"
@@ -154,7 +154,7 @@ class SlotProfileCache:
 class DatasetCaches:
     """Everything RadarWeightNet training needs from a dataset, network-independent and cached.
 
-    features: (N, T, 2, 19, 5) and facing counts (handradar.hand.features.BoneFeatures)
+    features: (N, T, 2, 19, 5) and facing counts (handradar.sim.features.BoneFeatures)
     masks: (N, T, 2) bool; times: (T,) seconds; profiles: the slot-profile cache of the N rows.
     """
 

@@ -51,16 +51,16 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from handradar.hand.features import HandModelConfig
 from handradar.hand.mesh import bone_radii
+from handradar.hand.model import HandModelConfig
 from handradar.hand.retarget import retarget, standard_lengths
 from handradar.radar.chain import ChainConfig, power_to_unit, profile_power
 from handradar.radar.config import RadarConfig
 from handradar.sim import effects as _effects  # noqa: F401  (registers the eight effects)
 from handradar.sim.effects.base import Effect, SimContext, build_effects
 from handradar.sim.interp import upsample_to_chirps
+from handradar.sim.profiles import combine_slots, scatterer_profiles, window_chirp_times
 from handradar.sim.scatterers import N_SLOTS, Scatterers, bone_scatterers
-from handradar.sim.synthesis import combine_slots, scatterer_profiles, window_chirp_times
 
 
 def hold_untracked(positions: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:

@@ -45,15 +45,20 @@ from lightning.fabric.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_path, atomic_write_text
-from handradar.data.provision import ArrayDataset, file_hash, import_callable, load_arrays
+from handradar.data.datasets import (
+    ArrayDataset,
+    file_hash,
+    import_callable,
+    load_arrays,
+)
 from handradar.data.splits import Split, few_shot_split, make_split
 from handradar.provenance import code_version, config_hash
+from handradar.runs.mlflow import TAG_PREFIX, Tracker, flatten
+from handradar.runs.tables import job_table
+from handradar.synthesis.providers import load_synthetic
 from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
-from handradar.tasks.fitting import TrackerLogger, make_trainer, resumable_fit, tensor_loader
 from handradar.tasks.gan import CGANModule, sample_per_class
-from handradar.tasks.providers import load_synthetic
-from handradar.tasks.report import job_table
-from handradar.tasks.tracking import TAG_PREFIX, Tracker, _flatten
+from handradar.training import TrackerLogger, make_trainer, resumable_fit, tensor_loader
 
 log = logging.getLogger(__name__)
 
@@ -398,6 +403,6 @@ def run(cfg: DictConfig, run_dir: str | Path | None = None) -> Path:
                 atomic_write_text(run_dir / "error.txt", f"{type(exc).__name__}: {exc}\n")
         raise
     if _is_rank_zero() and cfg.get("print_table", True):
-        params = {k: str(v) for k, v in _flatten(OmegaConf.to_container(cfg, resolve=True)).items()}
+        params = {k: str(v) for k, v in flatten(OmegaConf.to_container(cfg, resolve=True)).items()}
         print(job_table(params, metrics), flush=True)
     return run_dir

@@ -157,7 +157,7 @@ def example_figure(measured: np.ndarray, panels: dict[str, np.ndarray], ssim: di
 
 
 def diagnosis_figures(diagnosis, radar: RadarConfig, chain: ChainConfig, out_dir: str | Path) -> dict[str, Path]:
-    from handradar.gap.stats import per_example_ssim
+    from handradar.metrics import per_example_ssim
 
     out = Path(out_dir)
     rep = diagnosis.report

@@ -23,9 +23,9 @@ from hydra import compose, initialize_config_dir  # noqa: E402
 from hydra.utils import instantiate  # noqa: E402
 
 from handradar.config import VERSION_BASE, config_dir  # noqa: E402
-from handradar.data.recording import GESTURES  # noqa: E402
 from handradar.provenance import REPO_ROOT  # noqa: E402
 from handradar.radar.chain import velocity_axis_m_s  # noqa: E402
+from handradar.vocab import GESTURES  # noqa: E402
 from handradar.world import RecordingSpec, fast_example, world_config  # noqa: E402
 
 # effect -> (gesture, angle) where it shows best

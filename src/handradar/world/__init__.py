@@ -7,7 +7,7 @@ pattern (:mod:`.scene`), ADC and fast signal paths (:mod:`.render`), a Leap sens
 imports handradar.sim: the simulator is measured against it.
 """
 
-from handradar.world.config import EFFECTS, VOCABULARY, WorldConfig, world_config
+from handradar.world.config import EFFECTS, WorldConfig, world_config
 from handradar.world.generate import (
     RecordingSpec,
     build_world_dataset,
@@ -18,5 +18,5 @@ from handradar.world.generate import (
     write_world_recordings,
 )
 
-__all__ = ["EFFECTS", "VOCABULARY", "RecordingSpec", "WorldConfig", "build_world_dataset", "fast_example",
+__all__ = ["EFFECTS", "RecordingSpec", "WorldConfig", "build_world_dataset", "fast_example",
            "recording_specs", "simulate", "world_config", "write_recording", "write_world_recordings"]

@@ -13,17 +13,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from handradar.data.recording import GESTURES
+from handradar.vocab import EFFECTS as SIMULATED_EFFECTS
+from handradar.vocab import GESTURES, WORLD_ONLY_EFFECTS
 
 # Bump when the physics or the kinematics change: it enters every cache key.
 WORLD_VERSION = "world/1"
 
-# DESIGN section 5 vocabulary (the simulator's effect names) ...
-VOCABULARY = ("occlusion", "palm", "forearm", "multipath", "antenna_pattern", "noise", "sync_offset",
-              "tracking_jitter")
-# ... and effects outside it (Leap and receiver details; iq_imbalance is the diagnosis control).
-EXTRA_EFFECTS = ("dropouts", "calibration", "static_clutter", "iq_imbalance")
-EFFECTS = VOCABULARY + EXTRA_EFFECTS
+# Every effect the world can switch: the simulator's vocabulary and the world-only ones (handradar.vocab).
+EFFECTS = SIMULATED_EFFECTS + WORLD_ONLY_EFFECTS
 
 
 @dataclass(frozen=True)

@@ -29,12 +29,13 @@ from tqdm.auto import tqdm
 
 from handradar.data.examples import skeleton_steps, window_times
 from handradar.data.hdf5 import open_writer
-from handradar.data.recording import GESTURES, RecordingMeta, write_meta
+from handradar.data.recording import RecordingMeta, write_meta
 from handradar.hand.leap import write_leap_jsonl
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig, capture_spectrogram
 from handradar.radar.config import RadarConfig
 from handradar.radar.dca1000 import write_adc
+from handradar.vocab import GESTURES
 from handradar.world.config import WORLD_VERSION, WorldConfig, world_config
 from handradar.world.kinematics import GESTURE_TABLE, Motion, Subject
 from handradar.world.render import adc_cube, fast_profiles, noise_sigma

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from handradar.data.recording import GESTURES
+from handradar.vocab import GESTURES
 from handradar.world.config import Kinematics
 
 GESTURE_TABLE: dict[str, tuple[int, bool]] = {

@@ -22,7 +22,12 @@ import numpy as np
 import torch
 from scipy.interpolate import CubicSpline
 
-from handradar.radar.chain import ChainConfig, gate_bins, range_profiles_from_adc, range_response
+from handradar.radar.chain import (
+    ChainConfig,
+    gate_bins,
+    range_profiles_from_adc,
+    range_response,
+)
 from handradar.radar.config import RadarConfig
 from handradar.world.config import Effects, IQImbalance
 from handradar.world.scene import STATIC, ScatterTracks

@@ -30,7 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from handradar.errors import FormatError
-from handradar.hand.importers.common import MIRROR, read_float_rows, single_hand_sequence, trim_rows
+from handradar.hand.importers.common import (
+    MIRROR,
+    read_float_rows,
+    single_hand_sequence,
+    trim_rows,
+)
 from handradar.hand.skeleton import HandSequence
 
 FPS = 30.0

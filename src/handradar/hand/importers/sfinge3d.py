@@ -35,7 +35,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from handradar.errors import FormatError
-from handradar.hand.importers.common import MIRROR, read_float_rows, single_hand_sequence
+from handradar.hand.importers.common import (
+    MIRROR,
+    read_float_rows,
+    single_hand_sequence,
+)
 from handradar.hand.skeleton import HandSequence
 
 FPS = 20.0

@@ -50,7 +50,14 @@ the same draws, so that grid points are compared on the same noise.
 """
 
 from handradar.sim.effects.antenna_pattern import AntennaPattern
-from handradar.sim.effects.base import REGISTRY, STAGES, Effect, Param, SimContext, build_effects
+from handradar.sim.effects.base import (
+           REGISTRY,
+           STAGES,
+           Effect,
+           Param,
+           SimContext,
+           build_effects,
+)
 from handradar.sim.effects.forearm import Forearm
 from handradar.sim.effects.multipath import Multipath
 from handradar.sim.effects.noise import Noise
@@ -59,9 +66,5 @@ from handradar.sim.effects.palm import Palm
 from handradar.sim.effects.sync_offset import SyncOffset
 from handradar.sim.effects.tracking_jitter import TrackingJitter
 
-EFFECT_NAMES = ("occlusion", "palm", "forearm", "multipath", "antenna_pattern", "noise", "sync_offset",
-                "tracking_jitter")
-assert set(EFFECT_NAMES) <= set(REGISTRY)
-
-__all__ = ["EFFECT_NAMES", "REGISTRY", "STAGES", "AntennaPattern", "Effect", "Forearm", "Multipath", "Noise",
+__all__ = ["REGISTRY", "STAGES", "AntennaPattern", "Effect", "Forearm", "Multipath", "Noise",
            "Occlusion", "Palm", "Param", "SimContext", "SyncOffset", "TrackingJitter", "build_effects"]

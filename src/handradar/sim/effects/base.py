@@ -49,7 +49,7 @@ class SimContext:
     visibility: torch.Tensor | None
     radar: RadarConfig
     chain: ChainConfig
-    hand: object  # handradar.hand.features.HandModelConfig
+    hand: object  # handradar.hand.model.HandModelConfig
     rcs_exponent: float = 1.0  # aspect exponent of cylinder RCS (handradar.sim.rcs), for effects that add cylinders
 
 

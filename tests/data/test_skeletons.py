@@ -8,12 +8,12 @@ import json
 import numpy as np
 import pytest
 
-from handradar.data.recording import GESTURES
+from handradar.data.skeletons import SOURCES, iter_source, source_classes
 from handradar.errors import FormatError
 from handradar.hand.importers.dhg import GESTURES_28
 from handradar.hand.importers.sfinge3d import CLASSES as SFINGE_CLASSES
 from handradar.hand.placement import hand_centre, palm_normal
-from handradar.hand.sources import SOURCES, iter_source, source_classes
+from handradar.vocab import GESTURES
 from tests.data.writer import Scene, write_recording
 from tests.hand.template import moving_hand, rotation
 from tests.hand.test_dhg import write_sequence

@@ -46,7 +46,6 @@ import torch
 
 from handradar.atomic import atomic_path
 from handradar.hand.mesh import bone_radii, default_template
-from handradar.hand.retarget import retarget, standard_lengths
 from handradar.hand.skeleton import N_BONES
 from handradar.hand.visibility import visibility
 from handradar.provenance import config_hash
@@ -54,38 +53,6 @@ from handradar.provenance import config_hash
 FEATURE_NAMES = ("visible_vertices", "rcs_m2", "distance_m", "radial_velocity_m_s", "radial_acceleration_m_s2")
 N_FEATURES = len(FEATURE_NAMES)
 CACHE_FORMAT = "handradar.bone_features/2"  # 2: buried mesh vertices count as neither facing nor visible
-
-
-@dataclass(frozen=True)
-class HandModelConfig:
-    """The hand model shared by the features and the simulator.
-
-    retarget: rebuild the skeleton with standard bone lengths (handradar.hand.retarget).
-    hand_scale: multiplies the standard lengths.
-    sections, rings: cylinder mesh resolution (vertices per bone = sections * rings + 2).
-    backend: ray casting backend of handradar.hand.visibility.
-    visibility_stride: ray cast every n-th skeleton step (1 = all; 2 = 50 Hz at the 100 Hz rows,
-        counts interpolated in between: ray casting two hands costs ~35 ms a step).
-    """
-
-    retarget: bool = True
-    hand_scale: float = 1.0
-    sections: int = 20
-    rings: int = 21
-    backend: str = "auto"
-    visibility_stride: int = 2
-
-    def joints(self, positions: np.ndarray) -> np.ndarray:
-        """Joints (..., 21, 3) metres as the hand model sees them (retargeted or as given)."""
-        if not self.retarget:
-            return np.asarray(positions, dtype=np.float64)
-        pos = torch.as_tensor(np.asarray(positions, dtype=np.float64))
-        return retarget(pos, standard_lengths(self.hand_scale)).numpy()
-
-    def key(self) -> dict:
-        """Fields that change the features (the ray-casting backend does not)."""
-        return {"retarget": self.retarget, "hand_scale": self.hand_scale, "sections": self.sections,
-                "rings": self.rings, "visibility_stride": self.visibility_stride}
 
 
 @dataclass
@@ -113,7 +80,10 @@ def _fill_untracked(x: np.ndarray, mask: np.ndarray, times: np.ndarray) -> np.nd
 def bone_features(positions: np.ndarray, times: np.ndarray, mask: np.ndarray, wavelength_m: float,
                   cfg: HandModelConfig | None = None) -> BoneFeatures:
     """Features of one window (see module doc); positions (T, 2, 21, 3) metres, times (T,) seconds."""
-    from handradar.sim.scatterers import bone_geometry, bone_rcs_m2  # the simulator's own definitions
+    from handradar.sim.scatterers import (  # the simulator's own definitions
+        bone_geometry,
+        bone_rcs_m2,
+    )
 
     cfg = cfg or HandModelConfig()
     mask = np.asarray(mask, dtype=bool)

@@ -13,6 +13,26 @@ Two paths, one simulator:
 Outputs are ``handradar.dataset/1`` files, cached under ``cache_dir`` by a hash of everything that
 determines them and written atomically. RadarWeightNet checkpoints (:func:`save_weight_net`) hold
 the network's settings and weights and the hand model and skeleton rate they were trained with.
+
+The provider contracts (train.py's ``synth.provider`` and ``synth.external_provider``):
+Synthetic spectrograms enter train.py jobs through two Hydra-instantiated callables
+(``synth.provider`` and ``synth.external_provider``, both ``_partial_: true``):
+
+``provider(real_path: Path, rows: np.ndarray, mode: Literal["model", "enhanced"], *, fit_rows: np.ndarray,
+seed: int, cache_dir: Path) -> Path``
+    One synthetic spectrogram per requested row of the real dataset ``real_path``, simulated from
+    that row's skeleton, written as a ``handradar.dataset/1`` file whose rows follow ``rows`` (same
+    labels and meta order). ``mode="model"``: the modelling-only simulator; ``mode="enhanced"``:
+    simulator + RadarWeightNet, which the provider may fit on the radar data of ``fit_rows`` only
+    (the few-shot real rows; never the test rows). ``cache_dir`` is the provider's to cache in.
+
+``external_provider(source_cfg, *, seed: int, cache_dir: Path) -> Path``
+    Spectrograms synthesised from an external skeleton dataset (``source_cfg`` is the
+    ``data.sfinge3d`` or ``data.dhg`` node: ``name``, ``root``, ...), as a ``handradar.dataset/1``
+    file with the source's own labels and the class names in the attribute ``classes``.
+
+The defaults are :func:`synthesize_rows` and :func:`synthesize_external` (conf/train.yaml);
+:func:`load_synthetic` checks what a provider returned.
 """
 
 from __future__ import annotations
@@ -30,17 +50,26 @@ import torch
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_path
+from handradar.data.datasets import ArrayDataset, load_arrays
 from handradar.data.hdf5 import open_writer, read_attrs, read_meta_group, read_rows
 from handradar.errors import FormatError
-from handradar.hand.features import HandModelConfig, cached_bone_features
+from handradar.hand.model import HandModelConfig
 from handradar.hand.skeleton import HandSequence
 from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.sim.cache import DatasetCaches, SlotProfileCache, cache_slot_profiles
+from handradar.sim.features import cached_bone_features
 from handradar.sim.simulator import Simulator
-from handradar.tasks.synth import PAPER_SCHEDULE, Pairs, Phase, SynthFitModule, load_pairs, predict
+from handradar.synthesis.fit import (
+    PAPER_SCHEDULE,
+    Pairs,
+    Phase,
+    SynthFitModule,
+    load_pairs,
+    predict,
+)
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +152,7 @@ def fit_weight_net(sim: Simulator, train: Pairs, *, phases: Sequence[Phase] = PA
                    net_kwargs: dict | None = None, callbacks: Sequence[pl.Callback] = (),
                    logger: Any = False) -> RadarWeightNet:
     """Train a fresh RadarWeightNet on ``train`` with the SSIM loss (resumable with ``ckpt_dir``)."""
-    from handradar.tasks.fitting import EpochStartCheckpoint, StepSeed
+    from handradar.training import EpochStartCheckpoint, StepSeed
 
     pl.seed_everything(seed, verbose=False)
     net = RadarWeightNet(**(net_kwargs or {}))
@@ -186,7 +215,7 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
                     fit_rows: np.ndarray, seed: int, cache_dir: str | Path, sim: Any = None,
                     phases: Sequence[Phase | dict] | None = None, net_kwargs: dict | None = None,
                     n_jobs: int = 2) -> Path:
-    """``synth.provider`` (contract in handradar.tasks.providers): one synthetic row per requested row.
+    """``synth.provider`` (contract in handradar.synthesis.providers): one synthetic row per requested row.
 
     mode "enhanced" fits RadarWeightNet on the radar data of ``fit_rows`` only (never test rows).
     """
@@ -197,7 +226,7 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
         raise ValueError(f"mode must be 'model' or 'enhanced', found {mode!r}")
     simulator = dataset_simulator(real_path, sim)
     phases = _phases(phases)
-    from handradar.data.provision import file_hash
+    from handradar.data.datasets import file_hash
 
     key = config_hash(file_hash(real_path), rows.tolist(), mode, fit_rows.tolist() if mode == "enhanced" else None,
                       seed, _sim_key(simulator), [asdict(p) for p in phases] if mode == "enhanced" else None,
@@ -270,7 +299,7 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     weights: a RadarWeightNet checkpoint (:func:`save_weight_net`); None: modelling only.
     skipped: a list receiving (item, reason) for unreadable items (default: raise).
     """
-    from handradar.hand.sources import iter_source, source_classes
+    from handradar.data.skeletons import iter_source, source_classes
 
     name, root, options = source_options(source_cfg)
     net, info = (None, {}) if weights is None else load_weight_net(weights)
@@ -313,7 +342,7 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
 
 def synthesize_external(source_cfg: Any, *, seed: int, cache_dir: str | Path, radar: RadarConfig,
                         chain: ChainConfig, sim: Any = None, weights: str | Path | None = None) -> Path:
-    """``synth.external_provider`` (contract in handradar.tasks.providers): a cached handradar-synth run."""
+    """``synth.external_provider`` (contract in handradar.synthesis.providers): a cached handradar-synth run."""
     name, root, options = source_options(source_cfg)
     simulator = make_simulator(sim, radar, chain)
     key = config_hash(name, str(Path(root).resolve()), options, _sim_key(simulator), str(weights), "external")
@@ -322,3 +351,19 @@ def synthesize_external(source_cfg: Any, *, seed: int, cache_dir: str | Path, ra
         synthesize_source(source_cfg, out, radar=radar, chain=chain, sim=simulator, weights=weights,
                           cache_dir=cache_dir, progress=False)
     return out
+
+
+def load_synthetic(path: str | Path, expected_labels: np.ndarray, shape: tuple[int, int] = (64, 32)) -> ArrayDataset:
+    """A provider's output, checked against the rows it was asked for (count, labels in order, shape)."""
+    data = load_arrays(path)
+    expected_labels = np.asarray(expected_labels)
+    if len(data) != len(expected_labels):
+        raise FormatError(path, f"synthetic dataset has {len(data)} rows, the provider was asked for {len(expected_labels)}")
+    if not np.array_equal(data.y, expected_labels):
+        bad = int(np.flatnonzero(data.y != expected_labels)[0])
+        raise FormatError(path, f"synthetic row {bad} has label {data.y[bad]}, the requested row's label is "
+                                f"{expected_labels[bad]} (rows must follow the requested order)")
+    if data.x.shape[1:] != tuple(shape) or not np.isfinite(data.x).all() or data.x.min(initial=0) < 0 or data.x.max(initial=0) > 1:
+        raise FormatError(path, f"synthetic spectrograms must be (N, {shape[0]}, {shape[1]}) in [0, 1], found {data.x.shape} "
+                                f"in [{data.x.min(initial=0):.3g}, {data.x.max(initial=0):.3g}]")
+    return data

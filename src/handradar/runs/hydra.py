@@ -1,6 +1,6 @@
-"""Hydra callback that reports every job of a multirun, failed ones included.
+"""Hydra job helpers: the job's output folder and a callback that reports every job of a multirun.
 
-Hydra's launchers already run the remaining jobs when one raises (the exception is stored in the
+:func:`output_dir` is the folder Hydra made for the running job. :class:`JobReport`: Hydra's launchers already run the remaining jobs when one raises (the exception is stored in the
 job's return); this callback makes the outcome visible: each job appends a line to
 ``<sweep dir>/jobs.jsonl`` (number, overrides, status, run dir, error) as it ends, in its own
 process (so joblib and SLURM workers report too), and the end of the multirun prints a summary
@@ -21,7 +21,7 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
-from handradar.tasks.tracking import _file_lock
+from handradar.runs.mlflow import file_lock
 
 log = logging.getLogger(__name__)
 REPORT = "jobs.jsonl"
@@ -45,7 +45,7 @@ class JobReport(Callback):
                  "error": None if error is None else f"{type(error).__name__}: {error}"}
         sweep = Path(hydra.sweep.dir)
         sweep.mkdir(parents=True, exist_ok=True)
-        with _file_lock(sweep / f"{REPORT}.lock"):
+        with file_lock(sweep / f"{REPORT}.lock"):
             with open(sweep / REPORT, "a") as fh:
                 fh.write(json.dumps(entry) + "\n")
         if failed:
@@ -69,3 +69,10 @@ class JobReport(Callback):
         text = "\n".join(lines)
         (sweep / "jobs_summary.txt").write_text(text + "\n")
         print(text, flush=True)
+
+
+def output_dir() -> Path:
+    """The running Hydra job's output folder (``hydra.runtime.output_dir``)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    return Path(HydraConfig.get().runtime.output_dir)

@@ -26,7 +26,7 @@ from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 from torch.utils.data import DataLoader, Sampler, TensorDataset
 
-from handradar.tasks.tracking import Tracker
+from handradar.runs.mlflow import Tracker
 
 log = logging.getLogger(__name__)
 

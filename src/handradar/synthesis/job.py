@@ -26,8 +26,8 @@ import torch
 from omegaconf import OmegaConf
 
 from handradar.data.splits import default_train_values, ood_field, stratified_sample
-from handradar.tasks.synth import Pairs, load_pairs, predict, synth_scores
-from handradar.tasks.synthetic import (
+from handradar.synthesis.fit import Pairs, load_pairs, predict, synth_scores
+from handradar.synthesis.providers import (
     _phases,
     cache_rows,
     dataset_simulator,
@@ -71,10 +71,10 @@ def synth_splits(labels: np.ndarray, meta: dict[str, np.ndarray], seed: int, *, 
 
 
 def run_synth_fit(job) -> dict[str, float]:
-    """Job kind for train.py (``job: handradar.tasks.synth_fit.run_synth_fit``)."""
+    """Job kind for train.py (``job: handradar.synthesis.job.run_synth_fit``)."""
     from hydra.utils import instantiate
 
-    from handradar.tasks.fitting import TrackerLogger
+    from handradar.training import TrackerLogger
 
     cfg, real = job.cfg, job.real
     sc = cfg.synth_fit
@@ -122,7 +122,11 @@ def run_synth_fit(job) -> dict[str, float]:
 
 def _figures(job, sim, net, test: Pairs, real) -> None:
     """Measured / modelled / enhanced spectrograms, the per-reflection-point decomposition, weights."""
-    from handradar.viz.synth import plot_comparison, plot_decomposition, plot_weights
+    from handradar.viz.weightnet import (
+        plot_comparison,
+        plot_decomposition,
+        plot_weights,
+    )
 
     figs = job.run_dir / "figures"
     model = predict(sim, None, test)

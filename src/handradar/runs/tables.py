@@ -38,7 +38,7 @@ SYNTH_ROWS = (("", "held-out"), ("_hands", "single → double hands"), ("_occlus
               ("_angle", "0° → ±30°"), ("_subject", "unseen subjects"))
 SYNTH_COLUMNS = (("ssim_model", "SSIM modelling"), ("ssim_enhanced", "SSIM + RadarWeightNet"),
                  ("mse_model", "MSE modelling"), ("mse_enhanced", "MSE + RadarWeightNet"))
-SYNTH_JOB = "handradar.tasks.synth_fit.run_synth_fit"
+SYNTH_JOB = "handradar.synthesis.job.run_synth_fit"
 PRETRAIN_METRIC = re.compile(r"^test/acc_(scratch|pretrained)_(\d+)c_(\d+)pct$")
 
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from handradar.tasks.fitting import TrackerLogger
-from handradar.tasks.tracking import Tracker, sqlite_path
+from handradar.runs.mlflow import Tracker, sqlite_path
+from handradar.training import TrackerLogger
 
 
 def _client(uri: str):

@@ -5,24 +5,22 @@ reference world) gives a ``handradar.dataset/1`` file; the simulator is ``sim`` 
 are the baseline, every other effect a candidate), built on the dataset's own radar and chain;
 the output folder receives gap_report.json (DESIGN section 8), gap_report.md and its figures;
 an MLflow run (``logger``) records the config, code version, data hash, the report's headline
-numbers and the files. With ``+experiment=gap_benchmark`` the job is the withheld-effect
-benchmark instead (handradar.gap.benchmark).
+numbers and the files. The withheld-effect benchmark (handradar.gap.benchmark, its own job:
+``+experiment=gap_benchmark`` sets ``job``) reuses the helpers below.
 
 Public API:
 
-    run(cfg) -> Path                       the report (or the benchmark's results markdown)
+    run(cfg) -> Path                       the report's path
     sim_builder(sim_cfg, radar, chain) -> SimBuilder;  baseline_effects(sim_cfg) -> {effect: params}
     write_outputs(diagnosis, out_dir, radar, chain, source="") -> {"json", "md", figures...}
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
 from collections.abc import Mapping
 from pathlib import Path
 
-import numpy as np
 from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
@@ -35,6 +33,8 @@ from handradar.gap.report import write_report
 from handradar.provenance import code_version
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
+from handradar.runs.hydra import output_dir
+from handradar.runs.mlflow import TAG_PREFIX, Tracker, tracked_run
 
 log = logging.getLogger(__name__)
 
@@ -86,46 +86,13 @@ def headline_metrics(report: dict) -> dict[str, float]:
     return m
 
 
-@contextlib.contextmanager
-def tracked(cfg: DictConfig, tags: Mapping[str, object], run_name: str):
-    """An MLflow run (``logger``) around a job: config, tags; ended FINISHED or FAILED."""
-    tracker = instantiate(cfg.logger) if cfg.get("logger") else None
-    if tracker is None:
-        yield None
-        return
-    from handradar.tasks.tracking import TAG_PREFIX
-
-    tracker.start(run_name=run_name, tags={f"{TAG_PREFIX}{k}": str(v) for k, v in tags.items()})
-    resolved = OmegaConf.to_container(cfg, resolve=True)
-    tracker.log_params(resolved)
-    tracker.log_dict(resolved, "config.yaml")
-    try:
-        yield tracker
-        tracker.end("FINISHED")
-    except BaseException as exc:
-        with contextlib.suppress(Exception):
-            tracker.end("KILLED" if isinstance(exc, KeyboardInterrupt) else "FAILED")
-        raise
-
-
-def output_dir() -> Path:
-    from hydra.core.hydra_config import HydraConfig
-
-    return Path(HydraConfig.get().runtime.output_dir)
-
-
 def run(cfg: DictConfig) -> Path:
     """The diagnose.py job (module doc); returns the path printed as its last line."""
     import torch
 
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
-    bench = cfg.get("benchmark")
-    if bench is not None and bench.get("enabled", False):
-        from handradar.gap.benchmark import run_benchmark
-
-        return run_benchmark(cfg, output_dir())
-    from handradar.data.provision import file_hash
+    from handradar.data.datasets import file_hash
 
     path = instantiate(cfg.data.source).path()
     data = load_dataset(path)
@@ -135,19 +102,16 @@ def run(cfg: DictConfig) -> Path:
     out = output_dir()
     tags = {"preset": cfg.task_name, "seed": cfg.diagnose.seed, "data_path": path, "data_hash": file_hash(path),
             "code_version": code_version(), "run_dir": out}
-    with tracked(cfg, tags, f"{cfg.task_name}-seed{cfg.diagnose.seed}") as tracker:
+    tracker = instantiate(cfg.logger) if cfg.get("logger") else Tracker("", "", enabled=False)
+    with tracked_run(tracker, run_name=f"{cfg.task_name}-seed{cfg.diagnose.seed}", tags=tags,
+                     config=OmegaConf.to_container(cfg, resolve=True)):
         diag = diagnose(data, build, base, OmegaConf.to_container(cfg.diagnose, resolve=True),
                         cache_dir=Path(cfg.paths.cache_dir) / "gap", progress=bool(cfg.get("progress", True)))
         paths = write_outputs(diag, out, radar, chain, str(path))
-        if tracker is not None:
-            tracker.log_metrics(headline_metrics(diag.report))
-            tracker.set_tags({"handradar.cause": diag.report["cause"]})
-            for name, p in paths.items():
-                tracker.log_artifact(p, "figures" if p.suffix == ".png" else None)
+        tracker.log_metrics(headline_metrics(diag.report))
+        tracker.set_tags({f"{TAG_PREFIX}cause": diag.report["cause"]})
+        for name, p in paths.items():
+            tracker.log_artifact(p, "figures" if p.suffix == ".png" else None)
     log.info("cause: %s; gap closed after %s: %.3f", diag.report["cause"], diag.report["after"]["effects"],
              diag.report["after"]["gap_closed"])
     return paths["json"]
-
-
-def _np(x):  # JSON-friendly numbers for benchmark tables
-    return float(x) if isinstance(x, (np.floating, float)) else x

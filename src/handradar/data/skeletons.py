@@ -88,7 +88,8 @@ def dhg_items(root: str | Path, *, n_classes: int = 14, trim: bool = True, up_ax
 
 def leap_items(root: str | Path, *, errors: list | None = None) -> Iterator[SourceItem]:
     """Recordings under ``root``: leap.jsonl through meta.json's calibration (radar frame, radar clock)."""
-    from handradar.data.recording import GESTURES, find_recordings, read_meta
+    from handradar.data.recording import find_recordings, read_meta
+    from handradar.vocab import GESTURES
 
     root = Path(root)
     for folder in find_recordings(root):
@@ -113,7 +114,7 @@ SOURCES: dict[str, Callable[..., Iterator[SourceItem]]] = {
 
 def source_classes(name: str, **options) -> tuple[str, ...]:
     """Class names of a source without reading it (``n_classes`` for dhg)."""
-    from handradar.data.recording import GESTURES
+    from handradar.vocab import GESTURES
 
     if name == "sfinge3d":
         return sfinge3d.CLASSES

@@ -10,11 +10,17 @@ import h5py
 import numpy as np
 import pytest
 
-from handradar.data import provision
-from handradar.data.provision import HDF5Source, RecordingsSource, WorldSource, file_hash, load_arrays
+from handradar.data import datasets
+from handradar.data.datasets import (
+    HDF5Source,
+    RecordingsSource,
+    WorldSource,
+    file_hash,
+    load_arrays,
+)
 from handradar.errors import FormatError, HandradarError
 from handradar.radar.chain import ChainConfig
-from handradar.tasks.providers import load_synthetic
+from handradar.synthesis.providers import load_synthetic
 from tests.tasks.fakes import default_radar, write_fake_dataset
 
 
@@ -82,8 +88,8 @@ def test_world_source_calls_the_builder(fake_data: Path, tmp_path: Path, monkeyp
         seen.update(world=world_cfg, cache=cache_dir)
         return fake_data
 
-    monkeypatch.setattr(provision, "_test_builder", build, raising=False)
-    src = WorldSource("handradar.data.provision._test_builder", default_radar(), ChainConfig(), tmp_path, world={"n": 3})
+    monkeypatch.setattr(datasets, "_test_builder", build, raising=False)
+    src = WorldSource("handradar.data.datasets._test_builder", default_radar(), ChainConfig(), tmp_path, world={"n": 3})
     assert src.path() == fake_data.resolve() and seen == {"world": {"n": 3}, "cache": tmp_path}
     with pytest.raises(HandradarError, match="'no.such.builder' is not available"):
         WorldSource("no.such.builder", default_radar(), ChainConfig(), tmp_path).path()

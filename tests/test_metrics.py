@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from handradar.gap.stats import (
+from handradar.metrics import (
     bootstrap_difference,
     bootstrap_gap_closed,
     gap_closed,

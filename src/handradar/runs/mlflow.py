@@ -1,4 +1,4 @@
-"""MLflow tracking for train.py jobs: one run per job, safe for parallel jobs on one SQLite store.
+"""MLflow tracking for every job (train.py, diagnose.py): one run per job, safe for parallel jobs on one SQLite store.
 
 Parallel sweep jobs (joblib, SLURM arrays on a shared file system) writing to one SQLite file
 hit two known failures: the schema-migration race when several processes create a fresh
@@ -10,7 +10,8 @@ lock (an ``mlflow ui`` reading the store). Stores that are not SQLite files (an 
 need no lock.
 
 :class:`Tracker` is picklable (the client is created lazily), so Lightning's ddp_spawn can carry
-it into worker processes through :class:`handradar.tasks.fitting.TrackerLogger`. This module does
+it into worker processes through :class:`handradar.training.TrackerLogger`. :func:`tracked_run`
+is the one place a job's run starts and ends. This module does
 not import torch or Lightning (the table builder and the tests' worker processes start fast).
 """
 
@@ -39,7 +40,7 @@ def sqlite_path(tracking_uri: str) -> Path | None:
 
 
 @contextlib.contextmanager
-def _file_lock(path: Path | None) -> Iterator[None]:
+def file_lock(path: Path | None) -> Iterator[None]:
     if path is None:
         yield
         return
@@ -54,11 +55,11 @@ def _file_lock(path: Path | None) -> Iterator[None]:
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
-def _flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
+def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
     if isinstance(obj, Mapping):
         out: dict[str, Any] = {}
         for k, v in obj.items():
-            out.update(_flatten(v, f"{prefix}{k}."))
+            out.update(flatten(v, f"{prefix}{k}."))
         return out
     return {prefix[:-1]: obj}
 
@@ -91,7 +92,7 @@ class Tracker:
         delay = 0.05
         for attempt in range(self.retries + 1):
             try:
-                with _file_lock(self._lock_path()):
+                with file_lock(self._lock_path()):
                     if self._client is None:
                         self._client = self._make_client()
                     return fn(self._client)
@@ -157,7 +158,7 @@ class Tracker:
             return
         from mlflow.entities import Param
 
-        flat = {k: str(v)[:MAX_PARAM_LEN] for k, v in _flatten(params).items()}
+        flat = {k: str(v)[:MAX_PARAM_LEN] for k, v in flatten(params).items()}
         existing = self._call(lambda c: c.get_run(self.run_id).data.params)
         changed = sorted(k for k, v in flat.items() if k in existing and existing[k] != v)
         if changed:
@@ -192,3 +193,25 @@ class Tracker:
     def log_dict(self, obj: Any, name: str) -> None:
         if self.enabled:
             self._call(lambda c: c.log_dict(self.run_id, obj, name))
+
+
+@contextlib.contextmanager
+def tracked_run(tracker: Tracker, *, run_name: str, tags: Mapping[str, Any], config: Mapping | None = None,
+                run_id: str | None = None) -> Iterator[str | None]:
+    """A job's MLflow run: started (or resumed when ``run_id`` is in the store) with ``handradar.``
+    tags and the resolved ``config`` (params + ``config.yaml``), ended FINISHED, or KILLED / FAILED
+    when the job raises. Yields the run id (None for a disabled tracker)."""
+    prefixed = {f"{TAG_PREFIX}{k}": str(v) for k, v in tags.items()}
+    rid = tracker.start(run_id=run_id, run_name=run_name, tags=prefixed)
+    if tracker.enabled:
+        tracker.set_tags(prefixed)  # a resumed run keeps its first tags otherwise
+        if config is not None:
+            tracker.log_params(config)
+            tracker.log_dict(dict(config), "config.yaml")
+    try:
+        yield rid
+    except BaseException as exc:
+        with contextlib.suppress(Exception):
+            tracker.end("KILLED" if isinstance(exc, KeyboardInterrupt) else "FAILED")
+        raise
+    tracker.end("FINISHED")

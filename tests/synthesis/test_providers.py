@@ -15,12 +15,11 @@ import pytest
 import torch
 
 from handradar.data.hdf5 import open_writer, read_attrs, validate
-from handradar.hand.features import HandModelConfig
+from handradar.hand.model import HandModelConfig
 from handradar.hand.skeleton import N_BONES
-from handradar.sim.demo import window
 from handradar.sim.simulator import Simulator
-from handradar.tasks.synth import Phase, load_pairs, synth_scores
-from handradar.tasks.synthetic import (
+from handradar.synthesis.fit import Phase, load_pairs, synth_scores
+from handradar.synthesis.providers import (
     cache_rows,
     fit_weight_net,
     load_weight_net,
@@ -29,6 +28,7 @@ from handradar.tasks.synthetic import (
     spectrograms_of,
     synthesize_rows,
 )
+from tests.sim.demo import window
 
 RATE = 100.0
 HAND = HandModelConfig(visibility_stride=4)
@@ -105,7 +105,7 @@ def test_fit_is_reproducible_and_resumable(measured, radar, short_chain, tmp_pat
 
 
 def test_providers_follow_the_contract(measured, radar, short_chain, tmp_path):
-    from handradar.tasks.providers import load_synthetic
+    from handradar.synthesis.providers import load_synthetic
 
     labels = read_attrs(measured)["n"]
     rows = np.array([3, 1, 7, 12])

@@ -29,8 +29,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, TensorDataset
 
-from handradar.gap.stats import per_example_mse, per_example_ssim
-from handradar.models.losses import fast_ssim_loss
+from handradar.metrics import fast_ssim_loss, per_example_mse, per_example_ssim
 from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.sim.cache import DatasetCaches, unpack
 from handradar.sim.simulator import Simulator
@@ -134,7 +133,7 @@ class SynthFitModule(pl.LightningModule):
         return self.phases[-1]
 
     def train_dataloader(self) -> DataLoader:
-        from handradar.tasks.fitting import EpochSeededSampler
+        from handradar.training import EpochSeededSampler
 
         epoch = self.trainer.current_epoch if self._trainer is not None else 0
         n = len(self.train_pairs)

@@ -6,12 +6,18 @@ import numpy as np
 import pytest
 import torch
 
-import handradar.hand.features as features_mod
-from handradar.hand.features import FEATURE_NAMES, BoneFeatures, HandModelConfig, bone_features, cached_bone_features
+import handradar.sim.features as features_mod
 from handradar.hand.mesh import bone_radii, default_template
+from handradar.hand.model import HandModelConfig
 from handradar.hand.retarget import standard_hand
 from handradar.hand.skeleton import BONE_CHILD, BONE_PARENT
 from handradar.hand.visibility import visibility
+from handradar.sim.features import (
+    FEATURE_NAMES,
+    BoneFeatures,
+    bone_features,
+    cached_bone_features,
+)
 from handradar.sim.rcs import cos_angle, cylinder_rcs_m2
 
 WAVELENGTH = 3.8e-3
