@@ -26,8 +26,8 @@ from benchmarks.common import Result
 from handradar.data.ingest import ingest
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
-from handradar.gap.job import baseline_effects, sim_builder
 from handradar.provenance import REPO_ROOT
+from handradar.sim.factory import SimFactory
 
 N_RECORDINGS = 100
 
@@ -66,7 +66,8 @@ def run() -> list[Result]:
         for rwn in (True, False):
             cfg = {**diag_cfg, "radarweightnet": rwn}
             t0 = time.perf_counter()
-            d = diagnose(data, sim_builder(sim_cfg, data.radar, data.chain), baseline_effects(sim_cfg), cfg,
+            factory = SimFactory.from_config(sim_cfg, data.radar, data.chain)
+            d = diagnose(data, factory, factory.effects, cfg,
                          cache_dir=Path(tmp) / f"cache-{rwn}", progress=False)
             wall = time.perf_counter() - t0
             tag = "with RadarWeightNet readout" if rwn else "without RadarWeightNet (diagnose.radarweightnet=false)"

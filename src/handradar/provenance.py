@@ -8,6 +8,8 @@ import json
 import subprocess
 from pathlib import Path
 
+import numpy as np
+
 from handradar import __version__
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -42,3 +44,13 @@ def config_hash(*parts: object) -> str:
     """Stable 16-hex-digit hash of dataclasses, dicts, lists and scalars."""
     text = json.dumps([_canonical(p) for p in parts], sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def array_digest(*arrays: np.ndarray) -> str:
+    """SHA-256 (16 hex digits) of arrays' dtypes, shapes and bytes: cache keys of array data."""
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.dtype.str, a.shape)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]

@@ -23,6 +23,7 @@ from handradar.models.cgan import Discriminator, Generator
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.runs.mlflow import Tracker
+from handradar.sim.factory import SimFactory
 from handradar.sim.simulator import Simulator
 from tests.tasks.fakes import compose_train
 
@@ -56,7 +57,7 @@ def test_preset_composes_and_instantiates(preset: str, tmp_path: Path):
     assert isinstance(instantiate(cfg.data.source), WorldSource)  # the default data: the reference world
     assert isinstance(instantiate(cfg.radar), RadarConfig) and isinstance(instantiate(cfg.chain), ChainConfig)
     assert callable(instantiate(cfg.synth.provider)) and callable(instantiate(cfg.synth.external_provider))
-    sim = instantiate(cfg.sim)(radar=instantiate(cfg.radar), chain=instantiate(cfg.chain))
+    sim = SimFactory.from_config(cfg.sim, instantiate(cfg.radar), instantiate(cfg.chain))()
     assert isinstance(sim, Simulator) and not list(sim.effects)  # the paper's model by default
     if cfg.job == "variants":
         assert list(cfg.variants) == METRICS["few_shot"]

@@ -8,15 +8,13 @@ import torch
 
 from handradar.gap.data import GapData
 from handradar.gap.engine import RowSet
-from handradar.sim.simulator import Simulator
+from handradar.sim.factory import SimFactory
 from tests.sim.demo import window
 
 
-def builder(radar, chain):
-    """The SimBuilder of the tests: the paper's simulator plus the given effects."""
-    def build(effects):
-        return Simulator(radar, chain, effects=list(effects), effect_params={k: dict(v) for k, v in effects.items()})
-    return build
+def builder(radar, chain) -> SimFactory:
+    """The simulator factory of the tests: the paper's simulator, build(effects) adds the given effects."""
+    return SimFactory(radar, chain)
 
 
 def rows(radar, chain, n: int, seed: int = 0) -> tuple[RowSet, np.ndarray, dict]:

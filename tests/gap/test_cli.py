@@ -16,8 +16,8 @@ from omegaconf import OmegaConf
 
 from handradar.config import VERSION_BASE, config_dir
 from handradar.data.datasets import WorldSource
-from handradar.gap.job import baseline_effects, sim_builder
 from handradar.gap.report import validate_report
+from handradar.sim.factory import SimFactory
 from tests.data.writer import Scene, write_recording
 
 REPO = Path(__file__).resolve().parents[2]
@@ -31,8 +31,9 @@ def _compose(overrides):
 def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chain):
     cfg = _compose(["data.root=/nowhere", "sim.effects=[noise]", "+sim.effect_params.noise.snr_db=15"])
     assert instantiate(cfg.data.source).root == Path("/nowhere")
-    assert baseline_effects(cfg.sim) == {"noise": {"snr_db": 15}}
-    sim = sim_builder(cfg.sim, radar, chain)({"noise": {"snr_db": 15}, "palm": {}})
+    factory = SimFactory.from_config(cfg.sim, radar, chain)
+    assert factory.effects == {"noise": {"snr_db": 15}}
+    sim = factory({"noise": {"snr_db": 15}, "palm": {}})
     assert [e.name for e in sim.effects] == ["palm", "noise"] and sim.effect("noise").values() == {"snr_db": 15.0}
     assert cfg.logger.tracking_uri.startswith("sqlite:///") and cfg.logger.tracking_uri.endswith("mlflow/mlflow.db")
     b = _compose(["+experiment=gap_benchmark"])
@@ -41,7 +42,7 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     assert b.job == "handradar.gap.benchmark.run" and b.sim.effects == [] and not b.diagnose.radarweightnet
     assert b.benchmark.builder == "handradar.world.build_world_dataset"
     assert len(b.benchmark.cases) == 10 and {"nothing", "iq_imbalance"} <= set(b.benchmark.cases)
-    assert sim_builder(b.sim, radar, chain)({}).hand.sections == 10  # the preset's coarser visibility mesh
+    assert SimFactory.from_config(b.sim, radar, chain)({}).hand.sections == 10  # the preset's coarser visibility mesh
 
 
 @pytest.mark.slow

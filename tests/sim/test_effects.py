@@ -11,13 +11,13 @@ import torch
 from handradar.hand.retarget import standard_hand
 from handradar.radar.chain import gate_bins, remove_static_clutter, stft_power
 from handradar.sim.effects import REGISTRY, STAGES, Effect, build_effects
-from handradar.vocab import EFFECTS as EFFECT_NAMES
 from handradar.sim.effects.multipath import bounce_paths
 from handradar.sim.effects.palm import palm_frame
 from handradar.sim.profiles import scatterer_profiles
 from handradar.sim.rcs import cos_angle, disc_rcs_m2
 from handradar.sim.scatterers import Scatterers
 from handradar.sim.simulator import Simulator
+from handradar.vocab import EFFECTS as EFFECT_NAMES
 from tests.sim.demo import window as hand_window
 
 

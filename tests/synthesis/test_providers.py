@@ -114,14 +114,14 @@ def test_providers_follow_the_contract(measured, radar, short_chain, tmp_path):
     for mode in ("model", "enhanced"):
         out = synthesize_rows(measured, rows, mode, fit_rows=np.arange(8), seed=0, cache_dir=tmp_path,
                               phases=[Phase(2, 1e-3, 4)], net_kwargs={"hidden": 16, "fc": (16, 16)}, n_jobs=1,
-                              sim=lambda **kw: Simulator(hand=HAND, **kw))
+                              sim={"hand": HAND})
         validate(out)
         data = load_synthetic(out, y, shape=(64, 8))
         assert data.x.shape == (4, 64, 8) and labels == 16
         assert list(data.meta["recording"]) == [f"r{r}" for r in rows]
         again = synthesize_rows(measured, rows, mode, fit_rows=np.arange(8), seed=0, cache_dir=tmp_path,
                                 phases=[Phase(2, 1e-3, 4)], net_kwargs={"hidden": 16, "fc": (16, 16)}, n_jobs=1,
-                                sim=lambda **kw: Simulator(hand=HAND, **kw))
+                                sim={"hand": HAND})
         assert again == out  # cached
 
 

@@ -22,7 +22,7 @@ def main(cfg: DictConfig) -> None:
     skipped: list | None = None if cfg.synth.strict else []
     try:
         synthesize_source(cfg.source, out, radar=instantiate(cfg.radar), chain=instantiate(cfg.chain),
-                          sim=instantiate(cfg.sim), weights=cfg.synth.weights,
+                          sim=cfg.sim, weights=cfg.synth.weights,
                           skeleton_rate_hz=cfg.synth.skeleton_rate_hz, n_jobs=cfg.synth.n_jobs,
                           cache_dir=cfg.synth.cache_dir, skipped=skipped)
     except (HandradarError, ValueError) as exc:

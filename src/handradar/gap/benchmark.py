@@ -49,12 +49,7 @@ from omegaconf import DictConfig, OmegaConf
 from handradar.atomic import atomic_write_text
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
-from handradar.gap.job import (
-    baseline_effects,
-    headline_metrics,
-    sim_builder,
-    write_outputs,
-)
+from handradar.gap.job import headline_metrics, write_outputs
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import code_version, config_hash
 from handradar.runs.hydra import output_dir
@@ -277,7 +272,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             path = build_world(wcfg, radar, chain, world_cache)
             clean = clean or build_world(clean_cfg, radar, chain, world_cache)
             data = load_dataset(path)
-            diagnosis = diagnose(data, sim_builder(cfg.sim, data.radar, data.chain), baseline_effects(cfg.sim),
+            factory = SimFactory.from_config(cfg.sim, data.radar, data.chain)
+            diagnosis = diagnose(data, factory, factory.effects,
                                  diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
                                  progress=bool(cfg.get("progress", True)))
             write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))

@@ -28,7 +28,7 @@ No code here reads meta.json ``truth``: the rows come from a dataset file, which
 Public API:
 
     DiagnosisConfig(...)        (fields below; conf/diagnose.yaml ``diagnose:``)
-    diagnose(data: GapData, build: SimBuilder, base: {effect: params}, cfg, *, cache_dir=None,
+    diagnose(data: GapData, build: SimFactory, base: {effect: params}, cfg, *, cache_dir=None,
              progress=True) -> Diagnosis (report dict + the arrays the figures need)
 """
 
@@ -46,14 +46,13 @@ import torch
 from tqdm.auto import tqdm
 
 from handradar.gap.data import GapData, stratified_split
-from handradar.gap.engine import SimBuilder, Variant, VariantEngine, merge
+from handradar.gap.engine import Variant, VariantEngine, merge
 from handradar.gap.fit import (
     GridFit,
     calibrate_rcs_exponent,
     effect_grid,
     grid_fit,
     refine,
-    with_settings,
 )
 from handradar.gap.report import FACTORS, FORMAT
 from handradar.gap.where import (
@@ -71,6 +70,7 @@ from handradar.metrics import (
     per_example_ssim,
 )
 from handradar.sim.effects import REGISTRY
+from handradar.sim.factory import SimFactory
 from handradar.vocab import EFFECTS
 
 log = logging.getLogger(__name__)
@@ -174,7 +174,7 @@ def _bar(total: int, desc: str, enabled: bool):
 class _Runner:
     """One diagnosis: data, simulator builder, settings, and the fitting/evaluation steps."""
 
-    def __init__(self, data: GapData, build: SimBuilder, cfg: DiagnosisConfig, progress: bool) -> None:
+    def __init__(self, data: GapData, build: SimFactory, cfg: DiagnosisConfig, progress: bool) -> None:
         self.data, self.build, self.cfg, self.progress = data, build, cfg, progress
         self.target = torch.as_tensor(data.measured)
         self.excluded: list[dict] = []  # candidates left out (non-finite simulations), for the report
@@ -253,7 +253,7 @@ def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) 
     return ev
 
 
-def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConfig | Mapping | None = None, *,
+def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConfig | Mapping | None = None, *,
              cache_dir: str | Path | None = None, progress: bool = True) -> Diagnosis:
     """Run the diagnosis (module doc) on ``data`` with the baseline simulator ``build(base)``."""
     cfg = cfg if isinstance(cfg, DiagnosisConfig) else DiagnosisConfig.from_mapping(cfg)
@@ -267,7 +267,7 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
     if len(ev) < 20:
         log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
                     "(use 30 or more)", len(ev))
-    build = with_settings(build, noise_draws=cfg.noise_draws)
+    build = build.replace(noise_draws=cfg.noise_draws)
     fit_idx = _subset(data.labels, cal, cfg.fit_rows, cfg.seed + 1)
     refine_idx = _subset(data.labels, cal, cfg.refine_rows, cfg.seed + 2)
     base_sim = build(base)
@@ -303,7 +303,7 @@ def diagnose(data: GapData, build: SimBuilder, base: Variant, cfg: DiagnosisConf
                                                       batch_size=cfg.batch_size, progress=bar.update)
             calibration = {"rcs_exponent": best,
                            "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(exponents, scores)]}
-            build = with_settings(build, rcs_exponent=best)
+            build = build.replace(rcs_exponent=best)
             base_sim = build(base)
             lap("calibration")
         profiles = None

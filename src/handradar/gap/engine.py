@@ -26,7 +26,7 @@ Public API:
 
     RowSet(skeletons (N, T, 2, 21, 3), masks (N, T, 2), times (T,), visibility (N, T, 2, 19) | None)
         .take(idx) -> RowSet
-    SimBuilder: (effects {name: {param: value}}) -> Simulator     (see handradar.gap.diagnosis)
+    build: a handradar.sim.factory.SimFactory, build(effects {name: {param: value}}) -> Simulator
     VariantEngine(build, base, rows, batch_size=8)
         .spectrograms(variants, idx=None, progress=None) -> (V, n, doppler, columns) float32
         .signals(variant, idx, grad=False) -> iterator of (batch idx, spectrograms) (differentiable)
@@ -42,11 +42,11 @@ import numpy as np
 import torch
 
 from handradar.sim.effects import REGISTRY
+from handradar.sim.factory import SimFactory
 from handradar.sim.scatterers import N_SLOTS, Scatterers
 from handradar.sim.simulator import Simulator
 
 Variant = Mapping[str, Mapping[str, float]]
-SimBuilder = Callable[[Variant], Simulator]
 
 
 @dataclass
@@ -230,7 +230,7 @@ class _Appended:
 class VariantEngine:
     """Spectrograms of variants of a base simulator on a RowSet (module doc: which path each takes)."""
 
-    def __init__(self, build: SimBuilder, base: Variant, rows: RowSet, *, batch_size: int = 8,
+    def __init__(self, build: SimFactory, base: Variant, rows: RowSet, *, batch_size: int = 8,
                  base_profiles: Callable[[np.ndarray], torch.Tensor] | None = None) -> None:
         self.build, self.base, self.rows, self.batch_size = build, {k: dict(v) for k, v in base.items()}, rows, batch_size
         self.base_sim = build(self.base)

@@ -7,7 +7,6 @@ their grids, then optional gradient steps.
     calibrate_rcs_exponent(build, base, rows, idx, measured, exponents) -> (best exponent, [mean SSIM])
         the aspect exponent of the cylinder RCS (handradar.sim.rcs) that makes the baseline simulator
         closest to the measured rows
-    with_settings(build, rcs_exponent=None, noise_draws=None) -> SimBuilder
     grid_fit(engine, candidates, idx, measured, grids=None) -> {effect: GridFit}
         one pass over the rows scores every grid point of every candidate (mean SSIM; a grid point
         whose spectrograms are not finite scores -inf)
@@ -24,9 +23,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from handradar.gap.engine import RowSet, SimBuilder, VariantEngine, merge
+from handradar.gap.engine import RowSet, VariantEngine, merge
 from handradar.metrics import fast_ssim_loss, per_example_ssim
 from handradar.sim.effects import REGISTRY
+from handradar.sim.factory import SimFactory
 
 
 @dataclass
@@ -62,7 +62,7 @@ def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:
     return float(per_example_ssim(target, torch.as_tensor(spec)).mean())
 
 
-def calibrate_rcs_exponent(build: SimBuilder, base: Mapping, rows: RowSet, idx: np.ndarray, measured: np.ndarray,
+def calibrate_rcs_exponent(build: SimFactory, base: Mapping, rows: RowSet, idx: np.ndarray, measured: np.ndarray,
                            exponents: Sequence[float], *, batch_size: int = 8,
                            progress: Callable[[int], None] | None = None) -> tuple[float, list[float]]:
     """The cylinder RCS aspect exponent (of ``exponents``) under which the baseline simulator scores the
@@ -70,28 +70,9 @@ def calibrate_rcs_exponent(build: SimBuilder, base: Mapping, rows: RowSet, idx: 
     target = torch.as_tensor(measured[idx])
     scores = []
     for e in exponents:
-        engine = VariantEngine(with_settings(build, rcs_exponent=float(e)), base, rows, batch_size=batch_size)
+        engine = VariantEngine(build.replace(rcs_exponent=float(e)), base, rows, batch_size=batch_size)
         scores.append(_mean_ssim(target, engine.spectrograms([{}], idx, progress=progress)[0]))
     return float(exponents[int(np.argmax(scores))]), scores
-
-
-def with_settings(build: SimBuilder, *, rcs_exponent: float | None = None, noise_draws: int | None = None) -> SimBuilder:
-    """``build`` whose simulators get the given settings (None: leave as built): the cylinder RCS
-    aspect exponent, and the draws a noise effect averages (its expected spectrogram)."""
-    if rcs_exponent is None and noise_draws is None:
-        return build
-
-    def configured(effects):
-        sim = build(effects)
-        if rcs_exponent is not None:
-            sim.rcs_exponent = float(rcs_exponent)
-        if noise_draws is not None:
-            for e in sim.effects:
-                if hasattr(e, "draws"):
-                    e.draws = int(noise_draws)
-        return sim
-
-    return configured
 
 
 def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, measured: np.ndarray,

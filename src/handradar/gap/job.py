@@ -11,14 +11,12 @@ numbers and the files. The withheld-effect benchmark (handradar.gap.benchmark, i
 Public API:
 
     run(cfg) -> Path                       the report's path
-    sim_builder(sim_cfg, radar, chain) -> SimBuilder;  baseline_effects(sim_cfg) -> {effect: params}
     write_outputs(diagnosis, out_dir, radar, chain, source="") -> {"json", "md", figures...}
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping
 from pathlib import Path
 
 from hydra.utils import instantiate
@@ -27,7 +25,6 @@ from omegaconf import DictConfig, OmegaConf
 from handradar.atomic import atomic_write_text
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import Diagnosis, diagnose
-from handradar.gap.engine import SimBuilder
 from handradar.gap.markdown import render
 from handradar.gap.report import write_report
 from handradar.provenance import code_version
@@ -35,26 +32,9 @@ from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.runs.hydra import output_dir
 from handradar.runs.mlflow import TAG_PREFIX, Tracker, tracked_run
+from handradar.sim.factory import SimFactory
 
 log = logging.getLogger(__name__)
-
-
-def sim_builder(sim_cfg: DictConfig | Mapping, radar: RadarConfig, chain: ChainConfig) -> SimBuilder:
-    """Simulators of the ``sim`` config with any set of effects: build({name: params}) -> Simulator."""
-    partial = instantiate(sim_cfg)
-
-    def build(effects: Mapping[str, Mapping[str, float]]):
-        return partial(radar=radar, chain=chain, effects=list(effects),
-                       effect_params={k: dict(v) for k, v in effects.items()})
-
-    return build
-
-
-def baseline_effects(sim_cfg: DictConfig | Mapping) -> dict[str, dict[str, float]]:
-    """The baseline simulator's effects ``sim.effects`` with their ``sim.effect_params``."""
-    c = OmegaConf.to_container(sim_cfg, resolve=True) if isinstance(sim_cfg, DictConfig) else dict(sim_cfg)
-    params = c.get("effect_params") or {}
-    return {str(name): dict(params.get(name) or {}) for name in (c.get("effects") or [])}
 
 
 def write_outputs(diagnosis: Diagnosis, out_dir: str | Path, radar: RadarConfig, chain: ChainConfig,
@@ -97,15 +77,14 @@ def run(cfg: DictConfig) -> Path:
     path = instantiate(cfg.data.source).path()
     data = load_dataset(path)
     radar, chain = data.radar, data.chain  # simulate with the data's own radar and chain
-    build = sim_builder(cfg.sim, radar, chain)
-    base = baseline_effects(cfg.sim)
+    build = SimFactory.from_config(cfg.sim, radar, chain)
     out = output_dir()
     tags = {"preset": cfg.task_name, "seed": cfg.diagnose.seed, "data_path": path, "data_hash": file_hash(path),
             "code_version": code_version(), "run_dir": out}
     tracker = instantiate(cfg.logger) if cfg.get("logger") else Tracker("", "", enabled=False)
     with tracked_run(tracker, run_name=f"{cfg.task_name}-seed{cfg.diagnose.seed}", tags=tags,
                      config=OmegaConf.to_container(cfg, resolve=True)):
-        diag = diagnose(data, build, base, OmegaConf.to_container(cfg.diagnose, resolve=True),
+        diag = diagnose(data, build, build.effects, OmegaConf.to_container(cfg.diagnose, resolve=True),
                         cache_dir=Path(cfg.paths.cache_dir) / "gap", progress=bool(cfg.get("progress", True)))
         paths = write_outputs(diag, out, radar, chain, str(path))
         tracker.log_metrics(headline_metrics(diag.report))

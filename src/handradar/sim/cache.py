@@ -39,11 +39,11 @@ import torch
 from handradar.atomic import atomic_path
 from handradar.data.hdf5 import read_attrs, read_rows
 from handradar.errors import FormatError
-from handradar.provenance import config_hash
-from handradar.sim.features import BoneFeatures, _digest, cached_bone_features
+from handradar.provenance import array_digest, config_hash
+from handradar.sim.features import BoneFeatures, cached_bone_features
 from handradar.sim.scatterers import N_SLOTS
 
-CACHE_FORMAT = "handradar.slot_profiles/1"
+CACHE_FORMAT = "handradar.slot_profiles/2"  # 2: keyed by Simulator.key()
 
 
 def pack(profiles: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -61,17 +61,12 @@ def unpack(packed: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
 
 def slot_profiles_key(sim, skeletons: np.ndarray, masks: np.ndarray, times: np.ndarray | None = None,
                       visibility: np.ndarray | None = None) -> str:
-    effects = [(e.name, e.values(), getattr(e, "n_segments", None)) for e in sim.effects]
     arrays = [np.asarray(skeletons, np.float32), np.asarray(masks, bool)]
     if times is not None:
         arrays.append(np.asarray(times, np.float64))
     if visibility is not None:
         arrays.append(np.asarray(visibility, np.float32))
-    # the paper's RCS (exponent 1) keeps the keys that caches written before the exponent existed have
-    rcs = () if sim.rcs_exponent == 1.0 else (("rcs_exponent", sim.rcs_exponent),)
-    return config_hash(CACHE_FORMAT, sim.radar, sim.chain, sim.hand.key(), effects, sim.skeleton_rate_hz,
-                       sim.tx_power_w, sim.gain_tx_dbi, sim.gain_rx_dbi, times is None, visibility is None,
-                       _digest(*arrays), *rcs)
+    return config_hash(CACHE_FORMAT, sim.key(), times is None, visibility is None, array_digest(*arrays))
 
 
 @torch.no_grad()

@@ -35,7 +35,6 @@ Public API:
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,7 +47,7 @@ from handradar.atomic import atomic_path
 from handradar.hand.mesh import bone_radii, default_template
 from handradar.hand.skeleton import N_BONES
 from handradar.hand.visibility import visibility
-from handradar.provenance import config_hash
+from handradar.provenance import array_digest, config_hash
 
 FEATURE_NAMES = ("visible_vertices", "rcs_m2", "distance_m", "radial_velocity_m_s", "radial_acceleration_m_s2")
 N_FEATURES = len(FEATURE_NAMES)
@@ -106,18 +105,9 @@ def bone_features(positions: np.ndarray, times: np.ndarray, mask: np.ndarray, wa
     return BoneFeatures(feats.astype(np.float32), vis.facing)
 
 
-def _digest(*arrays: np.ndarray) -> str:
-    h = hashlib.sha256()
-    for a in arrays:
-        a = np.ascontiguousarray(a)
-        h.update(str((a.dtype.str, a.shape)).encode())
-        h.update(a.tobytes())
-    return h.hexdigest()[:16]
-
-
 def features_key(positions: np.ndarray, times: np.ndarray, masks: np.ndarray, wavelength_m: float,
                  cfg: HandModelConfig) -> str:
-    return config_hash(CACHE_FORMAT, cfg.key(), float(wavelength_m), _digest(
+    return config_hash(CACHE_FORMAT, cfg.key(), float(wavelength_m), array_digest(
         np.asarray(positions, np.float32), np.asarray(times, np.float64), np.asarray(masks, bool)))
 
 

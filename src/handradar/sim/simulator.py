@@ -17,6 +17,9 @@ The window starts at a frame boundary, so its chirp times are ``radar.chirp_time
 with frames = chain.frames_per_window(radar); the skeleton times default to
 ``arange(T) / skeleton_rate_hz`` (the dataset rows of handradar.data.examples).
 
+Build simulators with :class:`handradar.sim.factory.SimFactory` (the ``sim`` config, overrides
+at construction); the constructor below is what it calls.
+
 Public API:
 
     Simulator(radar, chain, *, hand=HandModelConfig(), effects=(), effect_params=None,
@@ -32,6 +35,7 @@ Public API:
             upsampled linearly in time to the chirp times
       .spectrogram(signal) -> (B, doppler, columns) in [0, 1] (signal effects, then the chain)
       .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
+      .key() -> dict of everything that determines the output (cache keys)
       .chirp_times (F, L, C) float64 buffer, seconds
       .context(skeleton, mask, *, times, visibility) -> SimContext (retargeted joints, ...) for effects
       .scatterers(ctx) -> Scatterers (bones + scatterer-stage effects);  .profiles_of(scat, times) -> slot profiles
@@ -101,6 +105,12 @@ class Simulator(nn.Module):
                              persistent=False)
 
     # ---- helpers -------------------------------------------------------------------------------
+    def key(self) -> dict:
+        """Everything that determines this simulator's output, for cache keys (handradar.provenance.config_hash)."""
+        return {"radar": self.radar, "chain": self.chain, "hand": self.hand.key(), "skeleton_rate_hz": self.skeleton_rate_hz,
+                "amplitude": (self.tx_power_w, self.gain_tx_dbi, self.gain_rx_dbi), "rcs_exponent": self.rcs_exponent,
+                "effects": [(e.name, e.values(), e.settings()) for e in self.effects]}
+
     def effect(self, name: str) -> Effect:
         for e in self.effects:
             if e.name == name:

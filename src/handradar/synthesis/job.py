@@ -72,13 +72,12 @@ def synth_splits(labels: np.ndarray, meta: dict[str, np.ndarray], seed: int, *, 
 
 def run_synth_fit(job) -> dict[str, float]:
     """Job kind for train.py (``job: handradar.synthesis.job.run_synth_fit``)."""
-    from hydra.utils import instantiate
 
     from handradar.training import TrackerLogger
 
     cfg, real = job.cfg, job.real
     sc = cfg.synth_fit
-    sim = dataset_simulator(real.path, instantiate(cfg.sim))
+    sim = dataset_simulator(real.path, cfg.sim)
     splits = synth_splits(real.y, real.meta, job.seed, test_fraction=float(sc.test_fraction),
                           max_train_rows=int(sc.max_train_rows), max_test_rows=int(sc.max_test_rows))
     # every row is cached (not only the splits' union): the cache key is then the dataset's, shared

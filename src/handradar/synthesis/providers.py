@@ -38,7 +38,7 @@ The defaults are :func:`synthesize_rows` and :func:`synthesize_external` (conf/t
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Literal
@@ -60,6 +60,7 @@ from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.sim.cache import DatasetCaches, SlotProfileCache, cache_slot_profiles
+from handradar.sim.factory import SimFactory
 from handradar.sim.features import cached_bone_features
 from handradar.sim.simulator import Simulator
 from handradar.synthesis.fit import (
@@ -74,23 +75,19 @@ from handradar.synthesis.fit import (
 log = logging.getLogger(__name__)
 
 WEIGHTS_FORMAT = "handradar.radarweightnet/1"
-SimFactory = Callable[..., Simulator]
+SimSpec = DictConfig | Mapping | Simulator | None  # the ``sim`` config, a built simulator, or None (the paper's)
 
 
-def make_simulator(sim: SimFactory | Simulator | DictConfig | None, radar: RadarConfig, chain: ChainConfig,
-                   skeleton_rate_hz: float | None = None) -> Simulator:
-    """A Simulator for ``radar``/``chain``: from a partial (``instantiate(cfg.sim)``), a config node,
-    an instance (checked to match) or None (the paper's model)."""
+def simulator_for(sim: SimSpec, radar: RadarConfig, chain: ChainConfig,
+                  skeleton_rate_hz: float | None = None) -> Simulator:
+    """The simulator of ``radar``/``chain``: built by :class:`SimFactory` from the ``sim`` config
+    (None: the paper's model), or ``sim`` itself when it is a simulator of that radar and chain."""
     if isinstance(sim, Simulator):
         if sim.radar != radar or sim.chain != chain:
             raise ValueError("the simulator's radar/chain differ from the data's")
         return sim
-    if isinstance(sim, DictConfig):
-        from hydra.utils import instantiate
-
-        sim = instantiate(sim)
-    kw = {} if skeleton_rate_hz is None else {"skeleton_rate_hz": float(skeleton_rate_hz)}
-    return (sim or Simulator)(radar=radar, chain=chain, **kw)
+    rate = {} if skeleton_rate_hz is None else {"skeleton_rate_hz": float(skeleton_rate_hz)}
+    return SimFactory.from_config(sim, radar, chain, **rate)()
 
 
 def _phases(phases: Sequence[Phase | dict] | None) -> tuple[Phase, ...]:
@@ -107,12 +104,12 @@ def _phases(phases: Sequence[Phase | dict] | None) -> tuple[Phase, ...]:
 
 
 # ---- caches of dataset rows --------------------------------------------------------------------------
-def dataset_simulator(dataset: str | Path, sim: SimFactory | Simulator | DictConfig | None) -> Simulator:
+def dataset_simulator(dataset: str | Path, sim: SimSpec) -> Simulator:
     """The simulator of a dataset file's radar, chain and skeleton rate."""
     attrs = read_attrs(dataset)
     if attrs.get("radar") is None or attrs.get("chain") is None:
         raise FormatError(dataset, "needs the attributes radar_cfg and chain to simulate its rows")
-    return make_simulator(sim, attrs["radar"], attrs["chain"], attrs.get("skeleton_rate_hz"))
+    return simulator_for(sim, attrs["radar"], attrs["chain"], attrs.get("skeleton_rate_hz"))
 
 
 def cache_rows(dataset: str | Path, rows: np.ndarray, sim: Simulator, cache_dir: str | Path, *,
@@ -212,7 +209,7 @@ def _write_rows_like(out: Path, real_path: Path, rows: np.ndarray, spectrograms:
 
 
 def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["model", "enhanced"], *,
-                    fit_rows: np.ndarray, seed: int, cache_dir: str | Path, sim: Any = None,
+                    fit_rows: np.ndarray, seed: int, cache_dir: str | Path, sim: SimSpec = None,
                     phases: Sequence[Phase | dict] | None = None, net_kwargs: dict | None = None,
                     n_jobs: int = 2) -> Path:
     """``synth.provider`` (contract in handradar.synthesis.providers): one synthetic row per requested row.
@@ -229,7 +226,7 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
     from handradar.data.datasets import file_hash
 
     key = config_hash(file_hash(real_path), rows.tolist(), mode, fit_rows.tolist() if mode == "enhanced" else None,
-                      seed, _sim_key(simulator), [asdict(p) for p in phases] if mode == "enhanced" else None,
+                      seed, simulator.key(), [asdict(p) for p in phases] if mode == "enhanced" else None,
                       net_kwargs or {})
     out = Path(cache_dir) / f"synthetic-{mode}-{key}.h5"
     if out.is_file():
@@ -249,11 +246,6 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
         del train
         spec = predict(simulator, net, load_pairs(caches, targets, np.asarray([local[int(r)] for r in rows]))).numpy()
     return _write_rows_like(out, real_path, rows, spec.astype(np.float32), key, simulator, mode)
-
-
-def _sim_key(sim: Simulator) -> dict:
-    return {"radar": sim.radar, "chain": sim.chain, "hand": asdict(sim.hand), "rate": sim.skeleton_rate_hz,
-            "effects": {e.name: e.values() for e in sim.effects}, "power": (sim.tx_power_w, sim.gain_tx_dbi, sim.gain_rx_dbi)}
 
 
 # ---- skeleton sources ----------------------------------------------------------------------------------
@@ -289,7 +281,7 @@ def source_options(source_cfg: Any) -> tuple[str, str, dict]:
     return str(name), str(root), {k: v for k, v in d.items() if v is not None}
 
 
-def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, chain: ChainConfig, sim: Any = None,
+def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, chain: ChainConfig, sim: SimSpec = None,
                       weights: str | Path | None = None, skeleton_rate_hz: float = 100.0, n_jobs: int = 2,
                       cache_dir: str | Path | None = None, progress: bool = True,
                       skipped: list | None = None) -> Path:
@@ -306,7 +298,7 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     if info:
         skeleton_rate_hz = float(info["skeleton_rate_hz"])
         sim_hand = HandModelConfig(**info["hand"])
-    simulator = make_simulator(sim, radar, chain, skeleton_rate_hz)
+    simulator = simulator_for(sim, radar, chain, skeleton_rate_hz)
     if info and simulator.hand != sim_hand:
         raise FormatError(weights, f"checkpoint trained with hand model {sim_hand}, simulator uses {simulator.hand}")
     n_steps = int(round(chain.frames_per_window(radar) * radar.frame_period_s * skeleton_rate_hz))
@@ -328,7 +320,7 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     pairs = load_pairs(caches, None, np.arange(len(items)), features=net is not None)
     spec = predict(simulator, net, pairs).numpy().astype(np.float32)
     classes = source_classes(name, **{k: v for k, v in options.items() if k == "n_classes"})
-    h = config_hash(name, root, options, _sim_key(simulator), str(weights), "handradar-synth")
+    h = config_hash(name, root, options, simulator.key(), str(weights), "handradar-synth")
     meta_keys = sorted(set().union(*(it.meta.keys() for it in items)))
     with open_writer(out, classes=classes, radar=radar, chain=chain, skeleton_rate_hz=skeleton_rate_hz,
                      n_steps=n_steps, config_hash=h,
@@ -341,11 +333,11 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
 
 
 def synthesize_external(source_cfg: Any, *, seed: int, cache_dir: str | Path, radar: RadarConfig,
-                        chain: ChainConfig, sim: Any = None, weights: str | Path | None = None) -> Path:
+                        chain: ChainConfig, sim: SimSpec = None, weights: str | Path | None = None) -> Path:
     """``synth.external_provider`` (contract in handradar.synthesis.providers): a cached handradar-synth run."""
     name, root, options = source_options(source_cfg)
-    simulator = make_simulator(sim, radar, chain)
-    key = config_hash(name, str(Path(root).resolve()), options, _sim_key(simulator), str(weights), "external")
+    simulator = simulator_for(sim, radar, chain)
+    key = config_hash(name, str(Path(root).resolve()), options, simulator.key(), str(weights), "external")
     out = Path(cache_dir) / f"external-{name}-{key}.h5"
     if not out.is_file():
         synthesize_source(source_cfg, out, radar=radar, chain=chain, sim=simulator, weights=weights,

@@ -53,7 +53,7 @@ from handradar.data.datasets import (
 )
 from handradar.data.splits import Split, few_shot_split, make_split
 from handradar.provenance import code_version, config_hash
-from handradar.runs.mlflow import TAG_PREFIX, Tracker, flatten
+from handradar.runs.mlflow import Tracker, flatten, tracked_run
 from handradar.runs.tables import job_table
 from handradar.synthesis.providers import load_synthetic
 from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
@@ -128,20 +128,15 @@ class Job:
             previous = json.loads(job_file.read_text()) if job_file.is_file() else {}
             if self.rank_zero:
                 self.tracker = instantiate(cfg.logger) if cfg.get("logger") else self.tracker
-            tags = {f"{TAG_PREFIX}preset": cfg.task_name, f"{TAG_PREFIX}seed": self.seed,
-                    f"{TAG_PREFIX}job_hash": jhash, f"{TAG_PREFIX}data_hash": data_hash,
-                    f"{TAG_PREFIX}code_version": code_version(), f"{TAG_PREFIX}run_dir": str(self.run_dir),
-                    f"{TAG_PREFIX}data_path": str(real_path)}
-            run_id = self.tracker.start(run_id=previous.get("mlflow_run_id"), run_name=f"{cfg.task_name}-seed{self.seed}",
-                                        tags={k: str(v) for k, v in tags.items()})
-            if self.rank_zero:
-                atomic_write_text(job_file, json.dumps({"job_hash": jhash, "mlflow_run_id": run_id,
-                                                        "run_dirs": [*previous.get("run_dirs", []), str(self.run_dir)]}, indent=1))
-                resolved = OmegaConf.to_container(cfg, resolve=True)
-                self.tracker.set_tags(tags)
-                self.tracker.log_params(resolved)
-                self.tracker.log_dict(resolved, "config.yaml")
-            try:
+            tags = {"preset": cfg.task_name, "seed": self.seed, "job_hash": jhash, "data_hash": data_hash,
+                    "code_version": code_version(), "run_dir": self.run_dir, "data_path": real_path}
+            config = OmegaConf.to_container(cfg, resolve=True) if self.rank_zero else None
+            with tracked_run(self.tracker, run_name=f"{cfg.task_name}-seed{self.seed}", tags=tags, config=config,
+                             run_id=previous.get("mlflow_run_id")) as run_id:
+                if self.rank_zero:
+                    atomic_write_text(job_file, json.dumps({"job_hash": jhash, "mlflow_run_id": run_id,
+                                                            "run_dirs": [*previous.get("run_dirs", []), str(self.run_dir)]},
+                                                           indent=1))
                 results: dict[str, dict] = {}
                 if cfg.job == "variants":
                     results = self.run_variants()
@@ -155,12 +150,6 @@ class Job:
                     metrics = {f"test/acc_{name}": r["acc"] for name, r in results.items()}
                 if self.rank_zero:
                     self._write_outputs(results, metrics)
-                    self.tracker.end("FINISHED")
-            except BaseException as exc:
-                if self.rank_zero:
-                    with contextlib.suppress(Exception):
-                        self.tracker.end("KILLED" if isinstance(exc, KeyboardInterrupt) else "FAILED")
-                raise
         return metrics
 
     @contextlib.contextmanager

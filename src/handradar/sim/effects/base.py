@@ -87,6 +87,10 @@ class Effect(nn.Module):
     def values(self) -> dict[str, float]:
         return {k: float(self.value(k)) for k in self.params}
 
+    def settings(self) -> dict[str, int]:
+        """Constructor settings that are not fitted parameters (segments, paths, seed, draws)."""
+        return {}
+
     def set_values(self, **values: float) -> Effect:
         for key, v in values.items():
             if key not in self.params:

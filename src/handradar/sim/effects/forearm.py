@@ -45,6 +45,9 @@ class Forearm(Effect):
         super().__init__(**values)
         self.n_segments = int(n_segments)
 
+    def settings(self) -> dict[str, int]:
+        return {"n_segments": self.n_segments}
+
     def apply_scatterers(self, scat, ctx):
         wrist = ctx.joints[..., 0, :]
         length = self.value("length_m").to(wrist.dtype)

@@ -106,6 +106,9 @@ class Multipath(Effect):
         super().__init__(**values)
         self.n_paths = int(n_paths)
 
+    def settings(self) -> dict[str, int]:
+        return {"n_paths": self.n_paths}
+
     def apply_scatterers(self, scat: Scatterers, ctx: SimContext) -> Scatterers:
         if not torch.equal(scat.owner[:N_SLOTS].cpu(), torch.arange(N_SLOTS)):
             raise ValueError("multipath needs the 38 bone points first (handradar.sim.scatterers.bone_scatterers)")

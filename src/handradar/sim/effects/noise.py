@@ -39,6 +39,9 @@ class Noise(Effect):
         self.draws = int(draws)
         self.reset_rng()
 
+    def settings(self) -> dict[str, int]:
+        return {"seed": self.seed, "draws": self.draws}
+
     def reset_rng(self) -> None:
         self.generator = torch.Generator().manual_seed(self.seed)
 
