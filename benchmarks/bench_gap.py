@@ -41,7 +41,7 @@ def recordings() -> Path:
     if env:
         return Path(env)
     from handradar.world import (
-        write_world_recordings,  # the reference world (DESIGN section 6)
+        write_world_recordings,  # the reference world (docs/architecture.md, "Reference world")
     )
 
     out = REPO_ROOT / ".cache" / "bench_gap" / "recordings"

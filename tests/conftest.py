@@ -17,7 +17,7 @@ from handradar.radar.config import RadarConfig
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("HANDRADAR_SHARED", REPO.parent / "shared"))
 DEFAULT_CFG = """\
-% the default radar of DESIGN section 5
+% the default radar of docs/architecture.md, "Processing chain and simulator"
 channelCfg 1 1 0
 adcCfg 2 1
 profileCfg 0 77 338.8 6 51.2 0 0 76.22 1 256 10000 0 0 30

@@ -14,9 +14,9 @@ from omegaconf import OmegaConf
 
 from handradar.config import config_dir, experiments_dir
 from handradar.data.datasets import (
-    HDF5Source,
-    RecordingsSource,
-    WorldSource,
+    DatasetFile,
+    RecordingsFolder,
+    ReferenceWorld,
     import_callable,
 )
 from handradar.models.cgan import Discriminator, Generator
@@ -54,7 +54,7 @@ def test_preset_composes_and_instantiates(preset: str, tmp_path: Path):
     tracker = instantiate(cfg.logger)
     assert isinstance(tracker, Tracker) and tracker.tracking_uri == f"sqlite:///{tmp_path}/mlflow/mlflow.db"
     assert tracker.experiment_name == preset
-    assert isinstance(instantiate(cfg.data.source), WorldSource)  # the default data: the reference world
+    assert isinstance(instantiate(cfg.data.dataset), ReferenceWorld)  # the default data: the reference world
     assert isinstance(instantiate(cfg.radar), RadarConfig) and isinstance(instantiate(cfg.chain), ChainConfig)
     assert callable(instantiate(cfg.synth.provider)) and callable(instantiate(cfg.synth.external_provider))
     sim = SimFactory.from_config(cfg.sim, instantiate(cfg.radar), instantiate(cfg.chain))()
@@ -88,10 +88,10 @@ def test_model_switch(model: str, cls: str):
 
 def test_data_sources(tmp_path: Path):
     h = compose_train(["data=hdf5", f"data.path={tmp_path}/x.h5"])
-    assert isinstance(instantiate(h.data.source), HDF5Source)
+    assert isinstance(instantiate(h.data.dataset), DatasetFile)
     r = compose_train(["data=recordings", f"data.root={tmp_path}", f"paths.cache_dir={tmp_path}/cache"])
-    src = instantiate(r.data.source)
-    assert isinstance(src, RecordingsSource) and isinstance(src.chain, ChainConfig)
+    src = instantiate(r.data.dataset)
+    assert isinstance(src, RecordingsFolder) and isinstance(src.chain, ChainConfig)
     assert src.cache_dir == tmp_path / "cache" / "datasets"
     with pytest.raises(Exception, match="data.path"):  # a missing mandatory value is named
         OmegaConf.to_container(compose_train(["data=hdf5"]).data, resolve=True, throw_on_missing=True)

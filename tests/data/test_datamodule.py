@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from handradar.data.datamodule import SpectrogramDataModule, stratified_split
+from handradar.data.datamodule import SpectrogramDataModule
 from handradar.data.hdf5 import open_writer, validate
+from handradar.data.splits import stratified_partition as stratified_split
 from handradar.vocab import GESTURES
 
 COUNTS = {0: 40, 3: 20, 7: 10}  # uneven classes

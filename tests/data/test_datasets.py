@@ -12,9 +12,9 @@ import pytest
 
 from handradar.data import datasets
 from handradar.data.datasets import (
-    HDF5Source,
-    RecordingsSource,
-    WorldSource,
+    DatasetFile,
+    RecordingsFolder,
+    ReferenceWorld,
     file_hash,
     load_arrays,
 )
@@ -25,13 +25,13 @@ from tests.tasks.fakes import default_radar, write_fake_dataset
 
 
 def test_hdf5_source(fake_data: Path, tmp_path: Path):
-    assert HDF5Source(fake_data).path() == fake_data.resolve()
+    assert DatasetFile(fake_data).path() == fake_data.resolve()
     with pytest.raises(FormatError, match="nope.h5: dataset file not found"):
-        HDF5Source(tmp_path / "nope.h5").path()
+        DatasetFile(tmp_path / "nope.h5").path()
     bad = tmp_path / "bad.h5"
     bad.write_bytes(b"not hdf5")
     with pytest.raises(FormatError, match="bad.h5: not a readable HDF5 file"):
-        HDF5Source(bad).path()
+        DatasetFile(bad).path()
 
 
 def test_load_arrays(fake_data: Path):
@@ -67,12 +67,12 @@ def test_recordings_source_ingests_once_per_content(tmp_path: Path, monkeypatch)
 
         return IngestSummary(found=2, written=2)
 
-    monkeypatch.setattr("handradar.data.ingest.ingest", fake_ingest)
-    src = RecordingsSource(root, ChainConfig(), tmp_path / "cache")
+    monkeypatch.setattr("handradar.data.datasets.ingest", fake_ingest)
+    src = RecordingsFolder(root, ChainConfig(), tmp_path / "cache")
     first = src.path()
     assert first.parent == (tmp_path / "cache").resolve() and first.name.startswith("recordings-")
     assert src.path() == first and len(calls) == 1  # cached
-    assert RecordingsSource(root, ChainConfig(dynamic_range_db=25.0), tmp_path / "cache").path() != first
+    assert RecordingsFolder(root, ChainConfig(dynamic_range_db=25.0), tmp_path / "cache").path() != first
     (root / "r2" / "meta.json").write_text("changed content")
     os.utime(root / "r2" / "meta.json", ns=(1, 1))
     assert src.path() != first and len(calls) == 3  # a changed recording is ingested again
@@ -89,10 +89,10 @@ def test_world_source_calls_the_builder(fake_data: Path, tmp_path: Path, monkeyp
         return fake_data
 
     monkeypatch.setattr(datasets, "_test_builder", build, raising=False)
-    src = WorldSource("handradar.data.datasets._test_builder", default_radar(), ChainConfig(), tmp_path, world={"n": 3})
+    src = ReferenceWorld("handradar.data.datasets._test_builder", default_radar(), ChainConfig(), tmp_path, world={"n": 3})
     assert src.path() == fake_data.resolve() and seen == {"world": {"n": 3}, "cache": tmp_path}
     with pytest.raises(HandradarError, match="'no.such.builder' is not available"):
-        WorldSource("no.such.builder", default_radar(), ChainConfig(), tmp_path).path()
+        ReferenceWorld("no.such.builder", default_radar(), ChainConfig(), tmp_path).path()
 
 
 def test_load_synthetic_checks_the_contract(fake_data: Path, tmp_path: Path):

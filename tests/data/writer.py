@@ -1,6 +1,6 @@
 """An independent writer of ``handradar.recording/1`` folders, for tests.
 
-It follows DESIGN section 4 literally and uses none of handradar's own writers or signal models:
+It follows docs/architecture.md, "Recording format" literally and uses none of handradar's own writers or signal models:
 radar.cfg as text, adc_data.bin packed by hand (I(n) I(n+1) Q(n) Q(n+1), RX-major), leap.jsonl
 lines and meta.json with the json module. The scene is a rigid right hand, palm down over the
 radar, whose centre moves straight along boresight at a known velocity; the radar sees one point
@@ -19,7 +19,7 @@ import numpy as np
 from tests.hand.template import TEMPLATE_RIGHT, rotation
 
 C = 299_792_458.0
-# the default radar of DESIGN section 5, with a finite number of frames
+# the default radar of docs/architecture.md, "Processing chain and simulator", with a finite number of frames
 F0_HZ, IDLE_S, ADC_START_S, RAMP_END_S, SLOPE_HZ_S = 77e9, 338.8e-6, 6e-6, 51.2e-6, 76.22e12
 N_SAMPLES, FS_HZ, N_LOOPS, PERIOD_S = 256, 10e6, 128, 0.1
 

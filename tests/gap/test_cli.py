@@ -15,7 +15,7 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from handradar.config import VERSION_BASE, config_dir
-from handradar.data.datasets import WorldSource
+from handradar.data.datasets import ReferenceWorld
 from handradar.gap.report import validate_report
 from handradar.sim.factory import SimFactory
 from tests.data.writer import Scene, write_recording
@@ -30,7 +30,7 @@ def _compose(overrides):
 
 def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chain):
     cfg = _compose(["data.root=/nowhere", "sim.effects=[noise]", "+sim.effect_params.noise.snr_db=15"])
-    assert instantiate(cfg.data.source).root == Path("/nowhere")
+    assert instantiate(cfg.data.dataset).root == Path("/nowhere")
     factory = SimFactory.from_config(cfg.sim, radar, chain)
     assert factory.effects == {"noise": {"snr_db": 15}}
     sim = factory({"noise": {"snr_db": 15}, "palm": {}})
@@ -38,7 +38,7 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     assert cfg.logger.tracking_uri.startswith("sqlite:///") and cfg.logger.tracking_uri.endswith("mlflow/mlflow.db")
     b = _compose(["+experiment=gap_benchmark"])
     OmegaConf.resolve(b)  # every interpolation resolves (the run logs the resolved config)
-    assert isinstance(instantiate(_compose(["data=world"]).data.source), WorldSource)
+    assert isinstance(instantiate(_compose(["data=world"]).data.dataset), ReferenceWorld)
     assert b.job == "handradar.gap.benchmark.run" and b.sim.effects == [] and not b.diagnose.radarweightnet
     assert b.benchmark.builder == "handradar.world.build_world_dataset"
     assert len(b.benchmark.cases) == 10 and {"nothing", "iq_imbalance"} <= set(b.benchmark.cases)

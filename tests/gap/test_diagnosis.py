@@ -60,7 +60,10 @@ def test_gap_outside_the_vocabulary_gives_none(radar, short_chain):
 
 
 def test_split_is_seeded_stratified_and_disjoint():
-    from handradar.gap.data import stratified_split
+    from handradar.data.splits import stratified_partition
+
+    def stratified_split(labels, f, seed):
+        return stratified_partition(labels, (f, 1 - f), seed, every_part=True)
 
     labels = np.repeat(np.arange(5), [7, 6, 5, 4, 1])
     cal, ev = stratified_split(labels, 0.5, seed=3)

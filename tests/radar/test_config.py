@@ -74,7 +74,7 @@ def test_visualizer_chirp_times_include_the_idle_gap(vis):
 
 
 def test_default_radar_figures(radar):
-    """DESIGN section 5: 77-80.9 GHz, ~7.7 cm, 19.7 m, v_max ~ 2.5 m/s, v_res ~ 0.04 m/s, 390 us."""
+    """docs/architecture.md, "Processing chain and simulator": 77-80.9 GHz, ~7.7 cm, 19.7 m, v_max ~ 2.5 m/s, v_res ~ 0.04 m/s, 390 us."""
     assert radar.chirp_period_s == pytest.approx(390e-6)
     assert radar.sweep_end_hz == pytest.approx(77e9 + 76.22e12 * 51.2e-6)
     assert radar.range_resolution_m == pytest.approx(C / (2 * 76.22e12 * 25.6e-6))

@@ -75,7 +75,7 @@ def test_rejects_a_foreign_file(tmp_path):
         h5.attrs["format"] = "something/1"
     with pytest.raises(FormatError, match="slot-profile cache"):
         SlotProfileCache(p)
-    assert cache_mod.CACHE_FORMAT == "handradar.slot_profiles/1"
+    assert cache_mod.CACHE_FORMAT == "handradar.slot_profiles/2"
 
 
 def test_cache_dataset_builds_both_caches(radar, short_chain, tmp_path):

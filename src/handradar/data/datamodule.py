@@ -15,27 +15,8 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader
 
+from handradar.data.splits import stratified_partition
 from handradar.data.torch_dataset import SpectrogramH5Dataset
-
-
-def stratified_split(labels: np.ndarray, fractions: Sequence[float], seed: int) -> list[np.ndarray]:
-    """Split row indices into len(fractions) parts with each class divided in those proportions.
-
-    Per class, rows are shuffled by ``seed`` and cut at round(n_class * cumulative fraction), so
-    every class is split as evenly as its count allows; the parts are returned sorted.
-    """
-    labels = np.asarray(labels)
-    f = np.asarray(fractions, dtype=np.float64)
-    if f.ndim != 1 or len(f) == 0 or np.any(f < 0) or not np.isclose(f.sum(), 1.0):
-        raise ValueError(f"split fractions must be non-negative and sum to 1, found {list(fractions)}")
-    rng = np.random.default_rng(seed)
-    parts: list[list[np.ndarray]] = [[] for _ in f]
-    for c in np.unique(labels):
-        rows = rng.permutation(np.flatnonzero(labels == c))
-        cuts = np.round(np.cumsum(f) * len(rows)).astype(int)
-        for k, (lo, hi) in enumerate(zip(np.r_[0, cuts[:-1]], cuts)):
-            parts[k].append(rows[lo:hi])
-    return [np.sort(np.concatenate(p)) if p else np.zeros(0, dtype=np.int64) for p in parts]
 
 
 class SpectrogramDataModule(L.LightningDataModule):
@@ -74,7 +55,7 @@ class SpectrogramDataModule(L.LightningDataModule):
             keep = np.isin(labels, list(self.label_map))
             rows, labels = rows[keep], np.asarray([self.label_map[int(v)] for v in labels[keep]])
         self.classes = full.classes
-        parts = stratified_split(labels, self.split, self.seed)
+        parts = stratified_partition(labels, self.split, self.seed)
         for name, part in zip(("train", "val", "test"), parts):
             self.indices[name] = rows[part]
             self.datasets[name] = SpectrogramH5Dataset(self.path, rows[part], with_skeleton=self.with_skeleton,

@@ -1,13 +1,13 @@
 """Where a job's real radar data come from, and loading a dataset file into memory.
 
-A *source* is a Hydra-instantiated object with ``path() -> Path``: the HDF5 dataset file
-(``handradar.dataset/1``) it stands for, materialised on first use and cached:
+A job's ``data.dataset`` is a Hydra-instantiated locator with ``path() -> Path``: the HDF5 dataset
+file (``handradar.dataset/1``) it stands for, materialised on first use and cached:
 
-- :class:`HDF5Source` (``data=hdf5 data.path=FILE.h5``): an existing file;
-- :class:`RecordingsSource` (``data=recordings data.root=DIR``): recordings ingested with
+- :class:`DatasetFile` (``data=hdf5 data.path=FILE.h5``): an existing file;
+- :class:`RecordingsFolder` (``data=recordings data.root=DIR``): recordings ingested with
   :func:`handradar.data.ingest.ingest` into ``<cache_dir>/recordings-<hash>.h5``, the hash covering
   the folder, every recording file's name, size and modification time, and the chain settings;
-- :class:`WorldSource` (``data=world``, the default): the reference world, built by the function
+- :class:`ReferenceWorld` (``data=world``, the default): the reference world, built by the function
   named in ``builder`` (``handradar.world.build_world_dataset(world_cfg, radar, chain, cache_dir)``).
 """
 
@@ -23,6 +23,8 @@ import h5py
 import numpy as np
 
 from handradar.data.hdf5 import read_attrs, read_meta_group, validate
+from handradar.data.ingest import ingest
+from handradar.data.recording import FILES, find_recordings
 from handradar.errors import FormatError, HandradarError
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
@@ -45,7 +47,7 @@ def import_callable(dotted: str):
     return obj
 
 
-class HDF5Source:
+class DatasetFile:
     """An existing dataset file."""
 
     def __init__(self, path: str | Path) -> None:
@@ -58,7 +60,7 @@ class HDF5Source:
         return self._path.resolve()
 
 
-class RecordingsSource:
+class RecordingsFolder:
     """A folder of ``handradar.recording/1`` recordings, ingested once into a cached dataset file."""
 
     def __init__(self, root: str | Path, chain: ChainConfig, cache_dir: str | Path, *,
@@ -68,8 +70,6 @@ class RecordingsSource:
         self.skeleton_rate_hz, self.strict, self.allow_truncated = skeleton_rate_hz, strict, allow_truncated
 
     def cache_key(self) -> str:
-        from handradar.data.recording import FILES, find_recordings
-
         listing = []
         for folder in find_recordings(self.root):
             for name in FILES:
@@ -80,8 +80,6 @@ class RecordingsSource:
                            "recordings")
 
     def path(self) -> Path:
-        from handradar.data.ingest import ingest
-
         if not self.root.is_dir():
             raise FormatError(self.root, "recordings folder not found (data.root)")
         out = self.cache_dir / f"recordings-{self.cache_key()}.h5"
@@ -92,8 +90,8 @@ class RecordingsSource:
         return out.resolve()
 
 
-class WorldSource:
-    """The reference world (DESIGN section 6), built and cached by ``builder``.
+class ReferenceWorld:
+    """The reference world (docs/architecture.md, "Reference world"), built and cached by ``builder``.
 
     builder: dotted name of ``build_world_dataset(world_cfg, radar, chain, cache_dir) -> Path``;
     it is imported only when the data are needed, so configs compose without it.

@@ -1,4 +1,4 @@
-"""The HDF5 dataset ``handradar.dataset/1`` (DESIGN section 7): writer, reader, validator.
+"""The HDF5 dataset ``handradar.dataset/1`` (docs/architecture.md, "HDF5 dataset"): writer, reader, validator.
 
 Datasets: ``spectrograms`` (N, 64, 32) float32 in [0, 1]; ``labels`` (N,) int64; ``skeletons``
 (N, T, 2, 21, 3) float32 radar-frame metres resampled to a common T over the spectrogram's time

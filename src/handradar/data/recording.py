@@ -1,4 +1,4 @@
-"""Recording folders in the ``handradar.recording/1`` format (DESIGN section 4).
+"""Recording folders in the ``handradar.recording/1`` format (docs/architecture.md, "Recording format").
 
 A recording is a folder with ``radar.cfg``, ``adc_data.bin``, ``leap.jsonl`` and ``meta.json``.
 :func:`load_recording` validates all four and returns the radar cube, the skeleton in the radar

@@ -22,11 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
+from handradar.data.recording import find_recordings, read_meta
 from handradar.errors import HandradarError
 from handradar.hand.importers import dhg, sfinge3d
 from handradar.hand.leap import read_leap_jsonl
 from handradar.hand.placement import DEFAULT_CENTRE_M, place_in_radar
 from handradar.hand.skeleton import HandSequence
+from handradar.vocab import GESTURES
 
 
 @dataclass
@@ -88,8 +90,6 @@ def dhg_items(root: str | Path, *, n_classes: int = 14, trim: bool = True, up_ax
 
 def leap_items(root: str | Path, *, errors: list | None = None) -> Iterator[SourceItem]:
     """Recordings under ``root``: leap.jsonl through meta.json's calibration (radar frame, radar clock)."""
-    from handradar.data.recording import find_recordings, read_meta
-    from handradar.vocab import GESTURES
 
     root = Path(root)
     for folder in find_recordings(root):
@@ -114,7 +114,6 @@ SOURCES: dict[str, Callable[..., Iterator[SourceItem]]] = {
 
 def source_classes(name: str, **options) -> tuple[str, ...]:
     """Class names of a source without reading it (``n_classes`` for dhg)."""
-    from handradar.vocab import GESTURES
 
     if name == "sfinge3d":
         return sfinge3d.CLASSES

@@ -1,4 +1,7 @@
-"""Seeded, class-stratified splits of a dataset's rows for the few-shot and OOD experiments.
+"""Seeded, class-stratified splits of a dataset's rows: the one home of every split.
+
+:func:`stratified_partition` cuts rows into parts (the datamodule's train/val/test, the gap
+diagnosis's calibration and evaluation halves); the rest serves the few-shot and OOD experiments.
 
 Every split is a :class:`Split` of row indices into one dataset file:
 
@@ -61,6 +64,45 @@ def stratified_sample(labels: np.ndarray, fraction: float, seed: int, rows: np.n
         k = max(1, int(round(fraction * len(members))))
         picked.append(_class_permutation(members, seed, c)[:k])
     return np.sort(np.concatenate(picked)) if picked else np.zeros(0, dtype=np.int64)
+
+
+def stratified_partition(labels: np.ndarray, fractions: Sequence[float], seed: int, *,
+                         every_part: bool = False) -> list[np.ndarray]:
+    """Row indices split into ``len(fractions)`` parts, each class divided in those proportions.
+
+    Per class (in label order), rows are shuffled by one generator seeded with ``seed`` and cut at
+    round(n_class * cumulative fraction); parts are returned sorted.
+
+    every_part: every part gets each class (the gap diagnosis's calibration / evaluation halves):
+    a class of n >= len(fractions) rows gives each part at least one row, and a class of one row
+    goes to the first part that is below its target size; a part left empty is an error.
+    """
+    labels = np.asarray(labels)
+    f = np.asarray(fractions, dtype=np.float64)
+    if f.ndim != 1 or len(f) == 0 or np.any(f < 0) or not np.isclose(f.sum(), 1.0):
+        raise ValueError(f"split fractions must be non-negative and sum to 1, found {list(fractions)}")
+    if every_part and np.any(f <= 0):
+        raise ValueError(f"every part needs a positive fraction, found {list(fractions)}")
+    rng = np.random.default_rng(seed)
+    parts: list[list[int]] = [[] for _ in f]
+    singles: list[int] = []
+    for c in np.unique(labels):
+        rows = rng.permutation(np.flatnonzero(labels == c))
+        if every_part and rows.size == 1:
+            singles.append(int(rows[0]))
+            continue
+        cuts = np.round(np.cumsum(f) * len(rows)).astype(int)
+        if every_part and rows.size >= len(f):  # at least one row per part
+            cuts = np.clip(cuts, np.arange(1, len(f) + 1), rows.size - np.arange(len(f) - 1, -1, -1))
+        for k, (lo, hi) in enumerate(zip(np.r_[0, cuts[:-1]], cuts)):
+            parts[k].extend(rows[lo:hi].tolist())
+    for r in rng.permutation(np.asarray(singles, dtype=np.int64)).tolist():
+        n = sum(len(p) for p in parts) + 1
+        k = next((k for k in range(len(f)) if len(parts[k]) < f[k] * n), len(f) - 1)
+        parts[k].append(int(r))
+    if every_part and not all(parts):
+        raise ValueError(f"{labels.size} rows cannot be split into {len(f)} non-empty parts")
+    return [np.sort(np.asarray(p, dtype=np.int64)) for p in parts]
 
 
 def few_shot_split(labels: np.ndarray, fraction: float, *, seed: int,

@@ -54,6 +54,7 @@ from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import code_version, config_hash
 from handradar.runs.hydra import output_dir
 from handradar.runs.mlflow import Tracker, tracked_run
+from handradar.sim.factory import SimFactory
 from handradar.viz.gap import confusion_figure
 from handradar.vocab import EFFECTS
 
@@ -272,7 +273,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             path = build_world(wcfg, radar, chain, world_cache)
             clean = clean or build_world(clean_cfg, radar, chain, world_cache)
             data = load_dataset(path)
-            factory = SimFactory.from_config(cfg.sim, data.radar, data.chain)
+            factory = SimFactory.from_config(cfg.sim, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
             diagnosis = diagnose(data, factory, factory.effects,
                                  diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
                                  progress=bool(cfg.get("progress", True)))

@@ -1,11 +1,10 @@
-"""The rows a gap diagnosis works on (a ``handradar.dataset/1`` file in memory) and its split.
+"""The rows a gap diagnosis works on: a ``handradar.dataset/1`` file in memory.
 
 Public API:
 
     GapData: measured (N, 64, 32) float32, rows (handradar.gap.engine.RowSet), labels (N,),
              meta {field: (N,)}, radar, chain, path;  .take(idx) -> GapData
     load_dataset(path) -> GapData       (FormatError naming the file if it cannot be simulated)
-    stratified_split(labels, calibration_fraction, seed) -> (calibration idx, evaluation idx)
 """
 
 from __future__ import annotations
@@ -63,32 +62,3 @@ def load_dataset(path: str | Path) -> GapData:
         raise FormatError(path, f"spectrograms {measured.shape[1:]} do not match the chain's "
                                 f"({chain.stft_len}, {chain.n_columns})")
     return GapData(measured, RowSet(skeletons, masks, times), labels, read_meta_group(path), radar, chain, rate, path)
-
-
-def stratified_split(labels: np.ndarray, calibration_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Disjoint calibration / evaluation rows, seeded, the same fraction of every class in each.
-
-    A class of n >= 2 rows gives round(fraction * n) rows (at least 1, at most n - 1) to calibration;
-    a class of one row goes to the split that is further below its target size.
-    """
-    if not 0.0 < calibration_fraction < 1.0:
-        raise ValueError(f"calibration_fraction must be in (0, 1), found {calibration_fraction}")
-    labels = np.asarray(labels)
-    rng = np.random.default_rng(seed)
-    cal: list[int] = []
-    ev: list[int] = []
-    singles: list[int] = []
-    for c in np.unique(labels):
-        rows = rng.permutation(np.flatnonzero(labels == c))
-        if rows.size == 1:
-            singles.append(int(rows[0]))
-            continue
-        k = int(np.clip(round(calibration_fraction * rows.size), 1, rows.size - 1))
-        cal.extend(rows[:k].tolist())
-        ev.extend(rows[k:].tolist())
-    for r in rng.permutation(np.asarray(singles, dtype=np.int64)).tolist():
-        n = len(cal) + len(ev) + 1
-        (cal if len(cal) < calibration_fraction * n else ev).append(int(r))
-    if not cal or not ev:
-        raise ValueError(f"{labels.size} rows cannot be split into calibration and evaluation rows")
-    return np.sort(np.asarray(cal, dtype=np.int64)), np.sort(np.asarray(ev, dtype=np.int64))

@@ -45,7 +45,8 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from handradar.gap.data import GapData, stratified_split
+from handradar.data.splits import stratified_partition
+from handradar.gap.data import GapData
 from handradar.gap.engine import Variant, VariantEngine, merge
 from handradar.gap.fit import (
     GridFit,
@@ -55,6 +56,7 @@ from handradar.gap.fit import (
     refine,
 )
 from handradar.gap.report import FACTORS, FORMAT
+from handradar.gap.rwn import rwn_readout
 from handradar.gap.where import (
     BoneResiduals,
     by_factor,
@@ -69,8 +71,11 @@ from handradar.metrics import (
     per_example_mse,
     per_example_ssim,
 )
+from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
 from handradar.sim.effects import REGISTRY
 from handradar.sim.factory import SimFactory
+from handradar.sim.features import BoneFeatures, cached_bone_features
+from handradar.sim.simulator import Simulator
 from handradar.vocab import EFFECTS
 
 log = logging.getLogger(__name__)
@@ -163,7 +168,8 @@ def _subset(labels: np.ndarray, idx: np.ndarray, n: int | None, seed: int) -> np
     """A stratified subset of ``n`` of the rows ``idx`` (all when n is None or >= len(idx))."""
     if n is None or n >= len(idx):
         return idx
-    keep, _ = stratified_split(labels[idx], max(min(n / len(idx), 0.999), 1e-3), seed)
+    f = max(min(n / len(idx), 0.999), 1e-3)
+    keep, _ = stratified_partition(labels[idx], (f, 1.0 - f), seed, every_part=True)
     return idx[keep]
 
 
@@ -263,7 +269,10 @@ def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConf
         raise ValueError(f"unknown candidate effect(s) {unknown}; expected some of {sorted(REGISTRY)}")
     order = list(EFFECTS) + sorted(set(REGISTRY) - set(EFFECTS))
     names = [n for n in order if n not in base and (cfg.candidates is None or n in cfg.candidates)]
-    cal, ev = stratified_split(data.labels, cfg.calibration_fraction, cfg.seed)
+    if not 0.0 < cfg.calibration_fraction < 1.0:
+        raise ValueError(f"calibration_fraction must be in (0, 1), found {cfg.calibration_fraction}")
+    f = cfg.calibration_fraction
+    cal, ev = stratified_partition(data.labels, (f, 1.0 - f), cfg.seed, every_part=True)
     if len(ev) < 20:
         log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
                     "(use 30 or more)", len(ev))
@@ -284,15 +293,22 @@ def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConf
         clock[0] = now
         log.info("%s: %.1f s", name, timings[name])
 
+    def bone_features(sim: Simulator) -> BoneFeatures:
+        # visibility for the occlusion effect and RadarWeightNet's input, at the simulator's RCS exponent
+        out = cached_bone_features(data.rows.skeletons, data.rows.times, data.rows.masks, data.radar.wavelength_m,
+                                   sim.hand, cache_dir, rcs_exponent=sim.rcs_exponent, progress=progress)
+        data.rows.visibility = out.visible_fraction()
+        nonlocal features_exponent
+        features_exponent = sim.rcs_exponent
+        lap("features")
+        return out
+
+    features_exponent = 1.0
+
     try:
         features = None
-        if "occlusion" in names or "occlusion" in base or cfg.radarweightnet:
-            from handradar.sim.features import cached_bone_features
-
-            features = cached_bone_features(data.rows.skeletons, data.rows.times, data.rows.masks,
-                                            data.radar.wavelength_m, base_sim.hand, cache_dir, progress=progress)
-            data.rows.visibility = features.visible_fraction()
-            lap("features")
+        if "occlusion" in base:  # step 0 simulates the baseline, which then needs visibility
+            features = bone_features(base_sim)
 
         # ---- step 0: the baseline's generic calibration (module doc) ------------------------------------
         calibration = {"rcs_exponent": 1.0, "grid": []}
@@ -306,10 +322,12 @@ def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConf
             build = build.replace(rcs_exponent=best)
             base_sim = build(base)
             lap("calibration")
+        # RadarWeightNet reads the RCS at the calibrated exponent; visibility alone does not depend on it
+        stale = features is None or (cfg.radarweightnet and features_exponent != base_sim.rcs_exponent)
+        if ("occlusion" in names or cfg.radarweightnet) and stale:
+            features = bone_features(base_sim)
         profiles = None
         if cfg.radarweightnet:
-            from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
-
             vis = data.rows.visibility if "occlusion" in base else None
             profiles = SlotProfileCache(cache_slot_profiles(base_sim, data.rows.skeletons, data.rows.masks, cache_dir,
                                                             times=data.rows.times, visibility=vis,
@@ -391,8 +409,6 @@ def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConf
 
         # ---- RadarWeightNet readout ------------------------------------------------------------------
         if cfg.radarweightnet and features is not None and profiles is not None:
-            from handradar.gap.rwn import rwn_readout
-
             train_idx = _subset(data.labels, cal, cfg.rwn_rows, cfg.seed + 3)
             readout, rwn_spec = rwn_readout(data, build, base, features, profiles, train_idx, ev, before_ssim,
                                             cands, cfg, progress=progress)

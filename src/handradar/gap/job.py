@@ -3,7 +3,7 @@
 One diagnosis: the data source (``data``: recordings ingested once into a cached dataset, or the
 reference world) gives a ``handradar.dataset/1`` file; the simulator is ``sim`` (its ``effects``
 are the baseline, every other effect a candidate), built on the dataset's own radar and chain;
-the output folder receives gap_report.json (DESIGN section 8), gap_report.md and its figures;
+the output folder receives gap_report.json (docs/architecture.md, "Gap report"), gap_report.md and its figures;
 an MLflow run (``logger``) records the config, code version, data hash, the report's headline
 numbers and the files. The withheld-effect benchmark (handradar.gap.benchmark, its own job:
 ``+experiment=gap_benchmark`` sets ``job``) reuses the helpers below.
@@ -23,6 +23,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_write_text
+from handradar.data.datasets import file_hash
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import Diagnosis, diagnose
 from handradar.gap.markdown import render
@@ -33,6 +34,7 @@ from handradar.radar.config import RadarConfig
 from handradar.runs.hydra import output_dir
 from handradar.runs.mlflow import TAG_PREFIX, Tracker, tracked_run
 from handradar.sim.factory import SimFactory
+from handradar.viz.gap import diagnosis_figures
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +42,6 @@ log = logging.getLogger(__name__)
 def write_outputs(diagnosis: Diagnosis, out_dir: str | Path, radar: RadarConfig, chain: ChainConfig,
                   source: str = "") -> dict[str, Path]:
     """gap_report.json (validated), figures/*.png and gap_report.md in ``out_dir``."""
-    from handradar.viz.gap import diagnosis_figures
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -72,12 +73,11 @@ def run(cfg: DictConfig) -> Path:
 
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
-    from handradar.data.datasets import file_hash
 
-    path = instantiate(cfg.data.source).path()
+    path = instantiate(cfg.data.dataset).path()
     data = load_dataset(path)
     radar, chain = data.radar, data.chain  # simulate with the data's own radar and chain
-    build = SimFactory.from_config(cfg.sim, radar, chain)
+    build = SimFactory.from_config(cfg.sim, radar, chain, skeleton_rate_hz=data.skeleton_rate_hz)
     out = output_dir()
     tags = {"preset": cfg.task_name, "seed": cfg.diagnose.seed, "data_path": path, "data_hash": file_hash(path),
             "code_version": code_version(), "run_dir": out}

@@ -1,4 +1,4 @@
-"""The gap report ``handradar.gap_report/1`` (DESIGN section 8): structure and validation."""
+"""The gap report ``handradar.gap_report/1`` (docs/architecture.md, "Gap report"): structure and validation."""
 
 from __future__ import annotations
 

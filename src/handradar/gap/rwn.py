@@ -2,9 +2,11 @@
 compared with the best physical effect, and which effect its learned weights resemble.
 
 RadarWeightNet (handradar.models.radar_weight_net) is trained briefly on the calibration split with
-the SSIM loss on the baseline simulator's cached slot profiles (handradar.sim.cache), then scored
-on the evaluation split like a candidate (gap_closed with a paired-bootstrap 95 % CI, and the
-paired bootstrap of its difference to the best physical effect).
+the SSIM loss on the baseline simulator's cached slot profiles (handradar.sim.cache), by the one
+RadarWeightNet training loop (handradar.synthesis.fit.fit_weight_net), then scored on the
+evaluation split like a candidate (gap_closed with a paired-bootstrap 95 % CI, and the paired
+bootstrap of its difference to the best physical effect). ``final_train_loss`` is 1 - SSIM of the
+trained network on its training rows.
 
 Weight correlation: for each candidate effect at its fitted values, the per-bone amplitude change
 log(A_k,effect / A_k,baseline) at every skeleton step (A_k: root sum of squares of the radar-equation
@@ -23,18 +25,19 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from handradar.gap.engine import merge
 from handradar.metrics import (
     bootstrap_difference,
     bootstrap_gap_closed,
-    fast_ssim_loss,
     per_example_mse,
     per_example_ssim,
 )
-from handradar.models.radar_weight_net import RadarWeightNet
+from handradar.sim.cache import DatasetCaches, SlotProfileCache
+from handradar.sim.factory import SimFactory
+from handradar.sim.features import BoneFeatures
 from handradar.sim.scatterers import N_SLOTS, radar_amplitude
+from handradar.synthesis.fit import Phase, fit_weight_net, load_pairs, predict
 
 
 def slot_amplitudes(sim, skeleton: torch.Tensor, mask: torch.Tensor, times: torch.Tensor,
@@ -62,52 +65,38 @@ def _pearson(a: torch.Tensor, b: torch.Tensor, valid: torch.Tensor) -> float | N
     return float(torch.corrcoef(torch.stack([a, b]))[0, 1])
 
 
-def rwn_readout(data, build, base, features, profiles, train_idx: np.ndarray, eval_idx: np.ndarray,
-                before_ssim: np.ndarray, candidates: list, cfg, *, progress: bool = True) -> tuple[dict, np.ndarray]:
-    torch.manual_seed(cfg.seed)
+def rwn_readout(data, build: SimFactory, base, features: BoneFeatures, profiles: SlotProfileCache,
+                train_idx: np.ndarray, eval_idx: np.ndarray, before_ssim: np.ndarray, candidates: list, cfg,
+                *, progress: bool = True) -> tuple[dict, np.ndarray]:
     sim = build(base)
-    net = RadarWeightNet(hidden=cfg.rwn_hidden, fc=(cfg.rwn_hidden, max(cfg.rwn_hidden // 2, 8)))
-    feats = torch.as_tensor(features.features)
-    masks = torch.as_tensor(data.rows.masks)
-    times = torch.as_tensor(data.rows.times, dtype=torch.float64)
-    target = torch.as_tensor(data.measured)
-    packed, scale, _ = profiles.load(train_idx)  # float16 view: ~2.6 MB a row in memory
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.rwn_lr)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    last = float("nan")
-    for _ in tqdm(range(cfg.rwn_epochs), desc="RadarWeightNet", disable=not progress, leave=False):
-        losses = []
-        for chunk in torch.randperm(len(train_idx), generator=gen).split(cfg.rwn_batch_size):
-            rows = train_idx[chunk.numpy()]
-            w = net(feats[rows], masks[rows])
-            spec = sim.spectrogram(sim.combine(packed[chunk], w, times=times, scale=scale[chunk]))
-            loss = fast_ssim_loss(spec.float(), target[rows])
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            losses.append(float(loss.detach()))
-        last = float(np.mean(losses))
-    net.eval()
-    specs, weights = [], []
+    caches = DatasetCaches(features, data.rows.masks, data.rows.times, profiles)
+    train = load_pairs(caches, data.measured, train_idx)
+    h = int(cfg.rwn_hidden)
+    net_kwargs = {"hidden": h, "fc": (h, max(h // 2, 8))}
+    # the training loop of every RadarWeightNet fit (handradar.synthesis.fit), with a short schedule
+    net = fit_weight_net(sim, train, phases=[Phase(int(cfg.rwn_epochs), float(cfg.rwn_lr), int(cfg.rwn_batch_size))],
+                         seed=int(cfg.seed), net_kwargs=net_kwargs, progress=progress)
+    final_loss = float(1.0 - per_example_ssim(train.targets, predict(sim, net, train)).mean())
+    del train
+    evaluation = load_pairs(caches, data.measured, eval_idx)
+    spec = predict(sim, net, evaluation, batch_size=int(cfg.batch_size))
     with torch.no_grad():
-        for i0 in range(0, len(eval_idx), cfg.batch_size):
-            rows = eval_idx[i0:i0 + cfg.batch_size]
-            p, s, _ = profiles.load(rows)
-            w = net(feats[rows], masks[rows])
-            specs.append(sim.spectrogram(sim.combine(p, w, times=times, scale=s)).float())
-            weights.append(w)
-    spec = torch.cat(specs)
+        weights = [net(evaluation.features[i:i + cfg.batch_size], evaluation.masks[i:i + cfg.batch_size])
+                   for i in range(0, len(evaluation), cfg.batch_size)]
+    target = torch.as_tensor(data.measured)
     ssim = per_example_ssim(target[eval_idx], spec)
     mse = per_example_mse(target[eval_idx], spec)
     boot = bootstrap_gap_closed(before_ssim, ssim, n_boot=cfg.n_boot, seed=cfg.seed)
     out = {"ssim": float(ssim.mean()), "mse": float(mse.mean()), "gap_closed": boot.estimate,
            "ci95": [boot.ci95[0], boot.ci95[1]], "train_rows": int(len(train_idx)), "epochs": cfg.rwn_epochs,
-           "final_train_loss": last}
+           "final_train_loss": final_loss}
     if candidates:
         best = candidates[0]
         diff, ci = bootstrap_difference(before_ssim, ssim, best.ssim, n_boot=cfg.n_boot, seed=cfg.seed)
         out.update(best_effect=best.effect, best_effect_gap_closed=float(best.gap_closed),
                    minus_best_effect=float(diff), minus_best_effect_ci95=[float(ci[0]), float(ci[1])])
+    masks = torch.as_tensor(data.rows.masks)
+    times = torch.as_tensor(data.rows.times, dtype=torch.float64)
     # ---- which effect the learned weights resemble ------------------------------------------------
     logw = torch.log(torch.cat(weights).double().clamp_min(1e-12))  # (n, T, 38)
     sk = torch.as_tensor(data.rows.skeletons[eval_idx])

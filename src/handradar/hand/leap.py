@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from handradar.atomic import atomic_write_text
 from handradar.errors import FormatError
 from handradar.hand.skeleton import HANDS, N_JOINTS, HandSequence
 
@@ -235,6 +236,5 @@ def leap_frames_from_sequence(seq: HandSequence, radar_to_leap: np.ndarray, rada
 
 def write_leap_jsonl(path: str | Path, frames: Iterable[dict]) -> None:
     """Write frames, one compact JSON object per line (atomically)."""
-    from handradar.atomic import atomic_write_text
 
     atomic_write_text(path, "".join(json.dumps(f, separators=(",", ":")) + "\n" for f in frames))

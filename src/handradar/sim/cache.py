@@ -183,7 +183,7 @@ def cache_dataset(dataset: str | Path, sim, cache_dir: str | Path, *, batch_size
         masks = h5["hand_mask"][()] if "hand_mask" in h5 else np.abs(skeletons).sum(axis=(-2, -1)) > 0
     times = np.arange(skeletons.shape[1]) / sim.skeleton_rate_hz
     feats = cached_bone_features(skeletons, times, masks, sim.radar.wavelength_m, sim.hand, cache_dir,
-                                 progress=progress, n_jobs=n_jobs)
+                                 rcs_exponent=sim.rcs_exponent, progress=progress, n_jobs=n_jobs)
     needs_visibility = any(e.name == "occlusion" for e in sim.effects)
     path = cache_slot_profiles(sim, skeletons, masks, cache_dir,
                                visibility=feats.visible_fraction() if needs_visibility else None,

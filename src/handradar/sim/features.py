@@ -4,7 +4,8 @@ For every step t, hand h and bone k (all from the retargeted skeleton, bone midp
 simulator's scattering centre, radar at the origin):
 
     visible_vertices       count of the bone's mesh vertices seen by the radar (0..422)
-    rcs_m2                 cylinder RCS (handradar.sim.rcs.cylinder_rcs_m2), m^2
+    rcs_m2                 cylinder RCS (handradar.sim.rcs.cylinder_rcs_m2) at the simulator's aspect
+                           exponent (``rcs_exponent``, part of the cache key), m^2
     distance_m             |midpoint|, metres
     radial_velocity_m_s    d distance / dt, m/s, positive = receding
     radial_acceleration_m_s2  d^2 distance / dt^2, m/s^2
@@ -45,13 +46,18 @@ import torch
 
 from handradar.atomic import atomic_path
 from handradar.hand.mesh import bone_radii, default_template
+from handradar.hand.model import HandModelConfig
 from handradar.hand.skeleton import N_BONES
 from handradar.hand.visibility import visibility
 from handradar.provenance import array_digest, config_hash
+from handradar.sim.scatterers import (  # the simulator's own definitions
+        bone_geometry,
+        bone_rcs_m2,
+    )
 
 FEATURE_NAMES = ("visible_vertices", "rcs_m2", "distance_m", "radial_velocity_m_s", "radial_acceleration_m_s2")
 N_FEATURES = len(FEATURE_NAMES)
-CACHE_FORMAT = "handradar.bone_features/2"  # 2: buried mesh vertices count as neither facing nor visible
+CACHE_FORMAT = "handradar.bone_features/3"  # 2: buried vertices neither facing nor visible; 3: RCS exponent in the key
 
 
 @dataclass
@@ -77,12 +83,10 @@ def _fill_untracked(x: np.ndarray, mask: np.ndarray, times: np.ndarray) -> np.nd
 
 
 def bone_features(positions: np.ndarray, times: np.ndarray, mask: np.ndarray, wavelength_m: float,
-                  cfg: HandModelConfig | None = None) -> BoneFeatures:
-    """Features of one window (see module doc); positions (T, 2, 21, 3) metres, times (T,) seconds."""
-    from handradar.sim.scatterers import (  # the simulator's own definitions
-        bone_geometry,
-        bone_rcs_m2,
-    )
+                  cfg: HandModelConfig | None = None, rcs_exponent: float = 1.0) -> BoneFeatures:
+    """Features of one window (see module doc); positions (T, 2, 21, 3) metres, times (T,) seconds;
+    ``rcs_exponent``: the simulator's cylinder RCS aspect exponent (handradar.sim.rcs), so that the
+    network reads the RCS the simulator uses."""
 
     cfg = cfg or HandModelConfig()
     mask = np.asarray(mask, dtype=bool)
@@ -91,7 +95,7 @@ def bone_features(positions: np.ndarray, times: np.ndarray, mask: np.ndarray, wa
     vis = visibility(joints, mask, template=default_template(cfg.sections, cfg.rings), backend=cfg.backend,
                      stride=cfg.visibility_stride)
     mid, axis, length = bone_geometry(torch.as_tensor(joints))
-    rcs = bone_rcs_m2(mid, axis, length, torch.as_tensor(bone_radii()), wavelength_m).numpy()
+    rcs = bone_rcs_m2(mid, axis, length, torch.as_tensor(bone_radii()), wavelength_m, float(rcs_exponent)).numpy()
     dist = np.linalg.norm(mid.numpy(), axis=-1)  # (T, 2, 19)
     m = mask[..., None] & np.ones(N_BONES, bool)
     if times.shape[0] >= 2 and mask.any():
@@ -106,14 +110,15 @@ def bone_features(positions: np.ndarray, times: np.ndarray, mask: np.ndarray, wa
 
 
 def features_key(positions: np.ndarray, times: np.ndarray, masks: np.ndarray, wavelength_m: float,
-                 cfg: HandModelConfig) -> str:
-    return config_hash(CACHE_FORMAT, cfg.key(), float(wavelength_m), array_digest(
+                 cfg: HandModelConfig, rcs_exponent: float = 1.0) -> str:
+    return config_hash(CACHE_FORMAT, cfg.key(), float(wavelength_m), float(rcs_exponent), array_digest(
         np.asarray(positions, np.float32), np.asarray(times, np.float64), np.asarray(masks, bool)))
 
 
 def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.ndarray, wavelength_m: float,
                          cfg: HandModelConfig | None = None, cache_dir: str | Path | None = None,
-                         *, progress: bool = False, chunk: int = 16, n_jobs: int = 1) -> BoneFeatures:
+                         *, rcs_exponent: float = 1.0, progress: bool = False, chunk: int = 16,
+                         n_jobs: int = 1) -> BoneFeatures:
     """Features of N windows, read from / written to ``cache_dir/bone_features-<hash>.h5``.
 
     positions (N, T, 2, 21, 3), times (T,) shared by all rows, masks (N, T, 2). Without a
@@ -129,13 +134,13 @@ def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.nda
                          f"{positions.shape}, {np.shape(times)}, {masks.shape}")
 
     def compute(i: int) -> BoneFeatures:
-        return bone_features(positions[i], times, masks[i], wavelength_m, cfg)
+        return bone_features(positions[i], times, masks[i], wavelength_m, cfg, rcs_exponent)
 
     if cache_dir is None:
         rows = [compute(i) for i in range(n)]
         return BoneFeatures(np.stack([r.features for r in rows]) if rows else np.zeros((0, t, 2, N_BONES, N_FEATURES), np.float32),
                             np.stack([r.facing for r in rows]) if rows else np.zeros((0, t, 2, N_BONES), np.int32))
-    key = features_key(positions, times, masks, wavelength_m, cfg)
+    key = features_key(positions, times, masks, wavelength_m, cfg, rcs_exponent)
     path = Path(cache_dir) / f"bone_features-{key}.h5"
     if path.is_file():
         with h5py.File(path, "r") as h5:
@@ -166,7 +171,8 @@ def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.nda
             i1 = min(n, i0 + chunk)
             if n_jobs > 1:
                 from joblib import Parallel, delayed
-                rows = Parallel(n_jobs=n_jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m, cfg)
+                rows = Parallel(n_jobs=n_jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m, cfg,
+                                                                       rcs_exponent)
                                                for i in range(i0, i1))
             else:
                 rows = [compute(i) for i in range(i0, i1)]

@@ -1,4 +1,4 @@
-"""Per-reflection-point IF synthesis in the chain's domain (DESIGN section 5), plain torch.
+"""Per-reflection-point IF synthesis in the chain's domain (docs/architecture.md, "Processing chain and simulator"), plain torch.
 
 For every reflection point k and chirp c (true chirp times, idle gaps included):
 

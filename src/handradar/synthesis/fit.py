@@ -22,17 +22,23 @@ Public API:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
 
 import lightning.pytorch as pl
 import numpy as np
 import torch
+from omegaconf import DictConfig, OmegaConf
 from torch.utils.data import DataLoader, TensorDataset
 
+from handradar.atomic import atomic_path
+from handradar.errors import FormatError
 from handradar.metrics import fast_ssim_loss, per_example_mse, per_example_ssim
 from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.sim.cache import DatasetCaches, unpack
 from handradar.sim.simulator import Simulator
+from handradar.training import EpochSeededSampler, EpochStartCheckpoint, StepSeed
 
 
 @dataclass(frozen=True)
@@ -45,6 +51,7 @@ class Phase:
 
 
 PAPER_SCHEDULE = (Phase(20, 5e-4, 32), Phase(50, 1e-4, 16))
+WEIGHTS_FORMAT = "handradar.radarweightnet/1"  # checkpoints of save_weight_net
 
 
 @dataclass
@@ -133,8 +140,6 @@ class SynthFitModule(pl.LightningModule):
         return self.phases[-1]
 
     def train_dataloader(self) -> DataLoader:
-        from handradar.training import EpochSeededSampler
-
         epoch = self.trainer.current_epoch if self._trainer is not None else 0
         n = len(self.train_pairs)
         return DataLoader(TensorDataset(torch.arange(n)), batch_size=min(self.phase(epoch).batch_size, n),
@@ -151,3 +156,61 @@ class SynthFitModule(pl.LightningModule):
         lr0 = self.phases[0].lr
         sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda epoch: self.phase(epoch).lr / lr0)
         return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "epoch"}}
+
+
+def schedule(phases: Sequence[Phase | dict] | None) -> tuple[Phase, ...]:
+    if phases is None:
+        return PAPER_SCHEDULE
+    out = []
+    for p in phases:
+        if isinstance(p, Phase):
+            out.append(p)
+        else:
+            d = OmegaConf.to_container(p) if isinstance(p, DictConfig) else dict(p)
+            out.append(Phase(int(d["epochs"]), float(d["lr"]), int(d["batch_size"])))
+    return tuple(out)
+
+
+def fit_weight_net(sim: Simulator, train: Pairs, *, phases: Sequence[Phase] = PAPER_SCHEDULE, seed: int = 0,
+                   trainer_kwargs: dict | None = None, ckpt_dir: str | Path | None = None,
+                   net_kwargs: dict | None = None, callbacks: Sequence[pl.Callback] = (),
+                   logger: Any = False, progress: bool = False) -> RadarWeightNet:
+    """Train a fresh RadarWeightNet on ``train`` with the SSIM loss (resumable with ``ckpt_dir``): the
+    one training loop of every RadarWeightNet fit (synth_fit, the enhanced variants, the diagnosis readout)."""
+    pl.seed_everything(seed, verbose=False)
+    net = RadarWeightNet(**(net_kwargs or {}))
+    module = SynthFitModule(sim, net, train, phases, seed=seed)
+    cbs = [*callbacks, StepSeed(seed)]
+    if ckpt_dir is not None:
+        cbs.append(EpochStartCheckpoint(ckpt_dir))
+    kw = {"accelerator": "cpu", "devices": 1, "deterministic": True, "enable_progress_bar": bool(progress),
+          "enable_model_summary": False, "num_sanity_val_steps": 0, "log_every_n_steps": 1, **(trainer_kwargs or {})}
+    trainer = pl.Trainer(max_epochs=module.total_epochs, reload_dataloaders_every_n_epochs=1, logger=logger,
+                         enable_checkpointing=False, callbacks=cbs,
+                         default_root_dir=str(ckpt_dir) if ckpt_dir else None, **kw)
+    last = Path(ckpt_dir) / "last.ckpt" if ckpt_dir is not None else None
+    trainer.fit(module, ckpt_path=str(last) if last is not None and last.is_file() else None)
+    return net.eval()
+
+
+def save_weight_net(path: str | Path, net: RadarWeightNet, sim: Simulator, net_kwargs: dict | None = None) -> Path:
+    """A RadarWeightNet checkpoint that ``synth.weights=`` / :func:`load_weight_net` read back."""
+    with atomic_path(path) as tmp:
+        torch.save({"format": WEIGHTS_FORMAT, "net_kwargs": dict(net_kwargs or {}), "state_dict": net.state_dict(),
+                    "hand": asdict(sim.hand), "skeleton_rate_hz": sim.skeleton_rate_hz}, tmp)
+    return Path(path)
+
+
+def load_weight_net(path: str | Path) -> tuple[RadarWeightNet, dict]:
+    """(network in eval mode, checkpoint info) from :func:`save_weight_net`'s file."""
+    path = Path(path)
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise FormatError(path, f"not a readable RadarWeightNet checkpoint ({exc})") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != WEIGHTS_FORMAT:
+        raise FormatError(path, f"expected a {WEIGHTS_FORMAT} checkpoint (written by synth_fit), "
+                                f"found {ckpt.get('format') if isinstance(ckpt, dict) else type(ckpt).__name__}")
+    net = RadarWeightNet(**ckpt["net_kwargs"])
+    net.load_state_dict(ckpt["state_dict"])
+    return net.eval(), ckpt

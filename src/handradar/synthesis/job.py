@@ -26,15 +26,23 @@ import torch
 from omegaconf import OmegaConf
 
 from handradar.data.splits import default_train_values, ood_field, stratified_sample
-from handradar.synthesis.fit import Pairs, load_pairs, predict, synth_scores
-from handradar.synthesis.providers import (
-    _phases,
-    cache_rows,
-    dataset_simulator,
+from handradar.synthesis.fit import (
+    Pairs,
     fit_weight_net,
+    load_pairs,
     load_weight_net,
+    predict,
     save_weight_net,
+    schedule,
+    synth_scores,
 )
+from handradar.synthesis.providers import cache_rows, dataset_simulator
+from handradar.training import TrackerLogger
+from handradar.viz.weightnet import (
+        plot_comparison,
+        plot_decomposition,
+        plot_weights,
+    )
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +81,6 @@ def synth_splits(labels: np.ndarray, meta: dict[str, np.ndarray], seed: int, *, 
 def run_synth_fit(job) -> dict[str, float]:
     """Job kind for train.py (``job: handradar.synthesis.job.run_synth_fit``)."""
 
-    from handradar.training import TrackerLogger
 
     cfg, real = job.cfg, job.real
     sc = cfg.synth_fit
@@ -91,7 +98,7 @@ def run_synth_fit(job) -> dict[str, float]:
     def pairs(sel: np.ndarray) -> Pairs:
         return load_pairs(caches, targets, sel)
 
-    phases = _phases(sc.phases)
+    phases = schedule(sc.phases)
     net_kwargs = OmegaConf.to_container(sc.net, resolve=True) if sc.get("net") else {}
     metrics: dict[str, float] = {}
     for suffix, (train, test) in splits.items():
@@ -121,11 +128,6 @@ def run_synth_fit(job) -> dict[str, float]:
 
 def _figures(job, sim, net, test: Pairs, real) -> None:
     """Measured / modelled / enhanced spectrograms, the per-reflection-point decomposition, weights."""
-    from handradar.viz.weightnet import (
-        plot_comparison,
-        plot_decomposition,
-        plot_weights,
-    )
 
     figs = job.run_dir / "figures"
     model = predict(sim, None, test)

@@ -44,18 +44,15 @@ from pathlib import Path
 from typing import Any, Literal
 
 import h5py
-import lightning.pytorch as pl
 import numpy as np
-import torch
 from omegaconf import DictConfig, OmegaConf
 
-from handradar.atomic import atomic_path
-from handradar.data.datasets import ArrayDataset, load_arrays
+from handradar.data.datasets import ArrayDataset, file_hash, load_arrays
 from handradar.data.hdf5 import open_writer, read_attrs, read_meta_group, read_rows
+from handradar.data.skeletons import iter_source, source_classes
 from handradar.errors import FormatError
 from handradar.hand.model import HandModelConfig
 from handradar.hand.skeleton import HandSequence
-from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
@@ -64,17 +61,16 @@ from handradar.sim.factory import SimFactory
 from handradar.sim.features import cached_bone_features
 from handradar.sim.simulator import Simulator
 from handradar.synthesis.fit import (
-    PAPER_SCHEDULE,
-    Pairs,
     Phase,
-    SynthFitModule,
+    fit_weight_net,
     load_pairs,
+    load_weight_net,
     predict,
+    schedule,
 )
 
 log = logging.getLogger(__name__)
 
-WEIGHTS_FORMAT = "handradar.radarweightnet/1"
 SimSpec = DictConfig | Mapping | Simulator | None  # the ``sim`` config, a built simulator, or None (the paper's)
 
 
@@ -88,19 +84,6 @@ def simulator_for(sim: SimSpec, radar: RadarConfig, chain: ChainConfig,
         return sim
     rate = {} if skeleton_rate_hz is None else {"skeleton_rate_hz": float(skeleton_rate_hz)}
     return SimFactory.from_config(sim, radar, chain, **rate)()
-
-
-def _phases(phases: Sequence[Phase | dict] | None) -> tuple[Phase, ...]:
-    if phases is None:
-        return PAPER_SCHEDULE
-    out = []
-    for p in phases:
-        if isinstance(p, Phase):
-            out.append(p)
-        else:
-            d = OmegaConf.to_container(p) if isinstance(p, DictConfig) else dict(p)
-            out.append(Phase(int(d["epochs"]), float(d["lr"]), int(d["batch_size"])))
-    return tuple(out)
 
 
 # ---- caches of dataset rows --------------------------------------------------------------------------
@@ -129,7 +112,7 @@ def cache_rows(dataset: str | Path, rows: np.ndarray, sim: Simulator, cache_dir:
     feats = None
     if features or needs_vis:
         feats = cached_bone_features(skel, times, mask, sim.radar.wavelength_m, sim.hand, cache_dir,
-                                     progress=progress, n_jobs=n_jobs)
+                                     rcs_exponent=sim.rcs_exponent, progress=progress, n_jobs=n_jobs)
     # times=None: the simulator's default step times, so the key matches cache_dataset's
     path = cache_slot_profiles(sim, skel, mask, cache_dir, visibility=feats.visible_fraction() if needs_vis else None,
                                progress=progress)
@@ -141,53 +124,6 @@ def spectrograms_of(dataset: str | Path, rows: np.ndarray) -> np.ndarray:
     uniq, inv = np.unique(np.asarray(rows, dtype=np.int64), return_inverse=True)
     with h5py.File(dataset, "r") as h5:
         return read_rows(h5["spectrograms"], uniq)[inv]
-
-
-# ---- RadarWeightNet ------------------------------------------------------------------------------------
-def fit_weight_net(sim: Simulator, train: Pairs, *, phases: Sequence[Phase] = PAPER_SCHEDULE, seed: int = 0,
-                   trainer_kwargs: dict | None = None, ckpt_dir: str | Path | None = None,
-                   net_kwargs: dict | None = None, callbacks: Sequence[pl.Callback] = (),
-                   logger: Any = False) -> RadarWeightNet:
-    """Train a fresh RadarWeightNet on ``train`` with the SSIM loss (resumable with ``ckpt_dir``)."""
-    from handradar.training import EpochStartCheckpoint, StepSeed
-
-    pl.seed_everything(seed, verbose=False)
-    net = RadarWeightNet(**(net_kwargs or {}))
-    module = SynthFitModule(sim, net, train, phases, seed=seed)
-    cbs = [*callbacks, StepSeed(seed)]
-    if ckpt_dir is not None:
-        cbs.append(EpochStartCheckpoint(ckpt_dir))
-    kw = {"accelerator": "cpu", "devices": 1, "deterministic": True, "enable_progress_bar": False,
-          "enable_model_summary": False, "num_sanity_val_steps": 0, "log_every_n_steps": 1, **(trainer_kwargs or {})}
-    trainer = pl.Trainer(max_epochs=module.total_epochs, reload_dataloaders_every_n_epochs=1, logger=logger,
-                         enable_checkpointing=False, callbacks=cbs,
-                         default_root_dir=str(ckpt_dir) if ckpt_dir else None, **kw)
-    last = Path(ckpt_dir) / "last.ckpt" if ckpt_dir is not None else None
-    trainer.fit(module, ckpt_path=str(last) if last is not None and last.is_file() else None)
-    return net.eval()
-
-
-def save_weight_net(path: str | Path, net: RadarWeightNet, sim: Simulator, net_kwargs: dict | None = None) -> Path:
-    """A RadarWeightNet checkpoint that ``synth.weights=`` / :func:`load_weight_net` read back."""
-    with atomic_path(path) as tmp:
-        torch.save({"format": WEIGHTS_FORMAT, "net_kwargs": dict(net_kwargs or {}), "state_dict": net.state_dict(),
-                    "hand": asdict(sim.hand), "skeleton_rate_hz": sim.skeleton_rate_hz}, tmp)
-    return Path(path)
-
-
-def load_weight_net(path: str | Path) -> tuple[RadarWeightNet, dict]:
-    """(network in eval mode, checkpoint info) from :func:`save_weight_net`'s file."""
-    path = Path(path)
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except (OSError, RuntimeError, ValueError) as exc:
-        raise FormatError(path, f"not a readable RadarWeightNet checkpoint ({exc})") from None
-    if not isinstance(ckpt, dict) or ckpt.get("format") != WEIGHTS_FORMAT:
-        raise FormatError(path, f"expected a {WEIGHTS_FORMAT} checkpoint (written by synth_fit), "
-                                f"found {ckpt.get('format') if isinstance(ckpt, dict) else type(ckpt).__name__}")
-    net = RadarWeightNet(**ckpt["net_kwargs"])
-    net.load_state_dict(ckpt["state_dict"])
-    return net.eval(), ckpt
 
 
 # ---- writing synthetic datasets ------------------------------------------------------------------------
@@ -222,8 +158,7 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
     if mode not in ("model", "enhanced"):
         raise ValueError(f"mode must be 'model' or 'enhanced', found {mode!r}")
     simulator = dataset_simulator(real_path, sim)
-    phases = _phases(phases)
-    from handradar.data.datasets import file_hash
+    phases = schedule(phases)
 
     key = config_hash(file_hash(real_path), rows.tolist(), mode, fit_rows.tolist() if mode == "enhanced" else None,
                       seed, simulator.key(), [asdict(p) for p in phases] if mode == "enhanced" else None,
@@ -291,7 +226,6 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     weights: a RadarWeightNet checkpoint (:func:`save_weight_net`); None: modelling only.
     skipped: a list receiving (item, reason) for unreadable items (default: raise).
     """
-    from handradar.data.skeletons import iter_source, source_classes
 
     name, root, options = source_options(source_cfg)
     net, info = (None, {}) if weights is None else load_weight_net(weights)
@@ -312,7 +246,8 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     cache_dir = Path(cache_dir) if cache_dir is not None else Path(out).parent / ".handradar-cache"
     needs_vis = net is not None or any(e.name == "occlusion" for e in simulator.effects)
     feats = (cached_bone_features(skel, times, mask, radar.wavelength_m, simulator.hand, cache_dir,
-                                  progress=progress, n_jobs=n_jobs) if needs_vis else None)
+                                  rcs_exponent=simulator.rcs_exponent, progress=progress, n_jobs=n_jobs)
+             if needs_vis else None)
     path = cache_slot_profiles(simulator, skel, mask, cache_dir, times=times, progress=progress,
                                visibility=feats.visible_fraction() if feats is not None and any(
                                    e.name == "occlusion" for e in simulator.effects) else None)

@@ -52,6 +52,7 @@ from handradar.data.datasets import (
     load_arrays,
 )
 from handradar.data.splits import Split, few_shot_split, make_split
+from handradar.models.classifiers import backbone_state
 from handradar.provenance import code_version, config_hash
 from handradar.runs.mlflow import Tracker, flatten, tracked_run
 from handradar.runs.tables import job_table
@@ -59,6 +60,7 @@ from handradar.synthesis.providers import load_synthetic
 from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
 from handradar.tasks.gan import CGANModule, sample_per_class
 from handradar.training import TrackerLogger, make_trainer, resumable_fit, tensor_loader
+from handradar.viz.confusion import plot_confusion
 
 log = logging.getLogger(__name__)
 
@@ -69,11 +71,11 @@ HASH_IGNORED = ("paths", "logger", "resume", "state_dir", "threads", "checkpoint
 
 def job_hash(cfg: DictConfig, data_hash: str) -> str:
     """Hash of what determines a job's results: the config without paths, logging and caches,
-    with the real-data source replaced by the data's content hash."""
+    with the dataset locator replaced by the data's content hash."""
     c = OmegaConf.to_container(cfg, resolve=True)
     for k in HASH_IGNORED:
         c.pop(k, None)
-    c.get("data", {}).pop("source", None)
+    c.get("data", {}).pop("dataset", None)
 
     def strip(o: Any) -> Any:
         if isinstance(o, dict):
@@ -115,7 +117,7 @@ class Job:
             torch.set_num_threads(int(cfg.threads))
         # Lightning's per-fit banners (devices, tips) would bury the job's own log.
         logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)
-        real_path = instantiate(cfg.data.source).path()
+        real_path = instantiate(cfg.data.dataset).path()
         self.real = load_arrays(real_path)
         data_hash = file_hash(real_path)
         jhash = job_hash(cfg, data_hash)
@@ -172,8 +174,6 @@ class Job:
                 fcntl.flock(fh, fcntl.LOCK_UN)
 
     def _write_outputs(self, results: dict[str, dict], metrics: dict[str, float]) -> None:
-        from handradar.viz.confusion import plot_confusion
-
         for name, r in results.items():
             cm_file = self.run_dir / "confusion" / f"{name}.json"
             atomic_write_text(cm_file, json.dumps({"classes": r["classes"], "matrix": r["confusion"]}))
@@ -326,8 +326,6 @@ class Job:
         return "sfinge3d", data.sfinge3d
 
     def pretrained_backbone(self) -> dict[str, torch.Tensor]:
-        from handradar.models.classifiers import backbone_state
-
         f = self.state / "pretrain" / "backbone.pt"
         if f.is_file():
             return torch.load(f, map_location="cpu")

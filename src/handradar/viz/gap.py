@@ -22,6 +22,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from handradar.atomic import atomic_path  # noqa: E402
+from handradar.metrics import per_example_ssim
 from handradar.radar.chain import ChainConfig, velocity_axis_m_s  # noqa: E402
 from handradar.radar.config import RadarConfig  # noqa: E402
 
@@ -157,8 +158,6 @@ def example_figure(measured: np.ndarray, panels: dict[str, np.ndarray], ssim: di
 
 
 def diagnosis_figures(diagnosis, radar: RadarConfig, chain: ChainConfig, out_dir: str | Path) -> dict[str, Path]:
-    from handradar.metrics import per_example_ssim
-
     out = Path(out_dir)
     rep = diagnosis.report
     figs = {"residual": residual_figure(diagnosis.measured, diagnosis.baseline, radar, chain, out / "residual.png"),

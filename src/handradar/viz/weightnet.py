@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from handradar.hand.skeleton import BONE_NAMES, HANDS
+from handradar.radar.chain import remove_static_clutter, stft_power
 from handradar.viz.common import pyplot, save_figure, spectrogram_panel
 
 SLOT_NAMES = tuple(f"{h[0].upper()} {b}" for h in HANDS for b in BONE_NAMES)
@@ -50,7 +51,6 @@ def plot_decomposition(sim, pairs, weights: np.ndarray, path: str | Path, *, tit
     order = [int(k) for k in np.argsort(energies)[::-1][:top] if energies[k] > 0]
     fig, axes = plt.subplots(1, len(order) + 1, figsize=(1.25 * (len(order) + 1), 2.2), squeeze=False)
     spectrogram_panel(axes[0, 0], full, "all points")
-    from handradar.radar.chain import remove_static_clutter, stft_power
 
     total = stft_power(remove_static_clutter(full_sig), sim.chain)[0].amax().item()
     for ax, k in zip(axes[0, 1:], order):

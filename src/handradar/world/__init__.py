@@ -1,6 +1,6 @@
 """The reference world: a finer, independent generator of paired radar + Leap recordings.
 
-It stands in for a capture rig (DESIGN section 6): gesture kinematics on per-subject skeletons
+It stands in for a capture rig (docs/architecture.md, "Reference world"): gesture kinematics on per-subject skeletons
 (:mod:`.kinematics`), a faceted radar scene with shadowing, palm, forearm, multipath and an antenna
 pattern (:mod:`.scene`), ADC and fast signal paths (:mod:`.render`), a Leap sensor model
 (:mod:`.sensor`) and the drivers that write recordings and datasets (:mod:`.generate`). It never

@@ -7,7 +7,7 @@ Bone lengths come from an adult template scaled by the subject's hand size (0.85
 few per-cent per-bone variation. Hand-local frame: +y along the fingers, +z out of the back of the
 hand (dorsal), +x = y cross z; a left hand is the mirror image (x -> -x) of a right hand.
 
-Radar frame (DESIGN section 3): z is boresight (up), the user sits at -y facing +y, so their right
+Radar frame (docs/architecture.md, "Coordinates and units"): z is boresight (up), the user sits at -y facing +y, so their right
 is +x. At rest a hand is held palm down (dorsal +z, fingers +y) 0.22-0.36 m above the radar; for
 angle theta the gesture centre moves to x = h tan(theta) (the hand seen theta off boresight).
 

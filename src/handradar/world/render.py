@@ -1,6 +1,6 @@
 """Scatterer tracks -> radar signals, at the true chirp times.
 
-Two routes with the same physics (DESIGN section 5 sign convention, see handradar.radar.signal):
+Two routes with the same physics (docs/architecture.md, "Processing chain and simulator" sign convention, see handradar.radar.signal):
 
 - ADC path: the complex beat signal of every scatterer sampled at each chirp, receiver noise,
   receiver I/Q imbalance, then int16 rounding when the capture is written (dca1000.write_adc).
@@ -27,6 +27,7 @@ from handradar.radar.chain import (
     gate_bins,
     range_profiles_from_adc,
     range_response,
+    window,
 )
 from handradar.radar.config import RadarConfig
 from handradar.world.config import Effects, IQImbalance
@@ -177,7 +178,6 @@ def fast_profiles(tracks: ScatterTracks, radar: RadarConfig, chain: ChainConfig,
 
 def _bin_fft(x: torch.Tensor, chain: ChainConfig, bins: np.ndarray) -> torch.Tensor:
     """Windowed fast-time FFT of (..., samples) at the given bins (the chain's range FFT)."""
-    from handradar.radar.chain import window
 
     w = window(chain.range_window, x.shape[-1], dtype=torch.float32)
     return torch.fft.fft(x * w, dim=-1)[..., torch.as_tensor(bins)]

@@ -1,4 +1,4 @@
-"""Importers of external skeleton sources into the canonical skeleton (DESIGN section 3).
+"""Importers of external skeleton sources into the canonical skeleton (docs/architecture.md, "Coordinates and units").
 
 Each returns :class:`~handradar.hand.skeleton.HandSequence` objects in the *source's* frame
 (made right-handed), with ``attrs["up_axis"]``; :func:`handradar.hand.placement.place_in_radar`

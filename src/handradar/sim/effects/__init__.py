@@ -1,7 +1,7 @@
 """Effects: physics the paper's simulator leaves out, each a small nn.Module that can be fitted.
 
 Names (configs, reports): ``occlusion``, ``palm``, ``forearm``, ``multipath``,
-``antenna_pattern``, ``noise``, ``sync_offset``, ``tracking_jitter`` (DESIGN section 5).
+``antenna_pattern``, ``noise``, ``sync_offset``, ``tracking_jitter`` (docs/architecture.md, "Processing chain and simulator").
 Select them with ``sim.effects=[occlusion,noise]`` and set parameters with
 ``sim.effect_params.noise.snr_db=15``; ``conf/sim/paper.yaml`` is the paper's model (no effects).
 
