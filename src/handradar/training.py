@@ -1,8 +1,8 @@
-"""Resumable, reproducible Lightning fits: loaders, seeding, checkpoints.
+"""Resumable, reproducible Lightning fits: seeding, checkpoints, the MLflow logger.
 
 A fit is a function of the seed alone, also across an interruption: the shuffling order of an
-epoch depends only on (seed, epoch) (:class:`EpochSeededSampler`, which Lightning advances through
-``set_epoch``), and every training step reseeds torch's global generator from (seed, step, rank)
+epoch depends only on (seed, epoch) (handradar.data.datamodule.EpochSeededSampler, which Lightning advances
+through ``set_epoch``), and every training step reseeds torch's global generator from (seed, step, rank)
 (:class:`StepSeed`, so dropout masks and GAN noise do not depend on the history of the
 process). A fit resumes from ``<ckpt_dir>/last.ckpt`` (:class:`EpochStartCheckpoint`, rewritten as
 each epoch starts), so a job killed during epoch k repeats only epoch k and ends with the same weights.
@@ -12,40 +12,21 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import lightning.pytorch as pl
-import numpy as np
 import torch
 from hydra.utils import instantiate
 from lightning.pytorch.callbacks import Callback
 from lightning.pytorch.loggers.logger import Logger
 from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
-from torch.utils.data import DataLoader, Sampler, TensorDataset
 
 from handradar.runs.mlflow import Tracker
 
 log = logging.getLogger(__name__)
-
-
-class EpochSeededSampler(Sampler[int]):
-    """A permutation of ``range(n)`` that depends only on (seed, epoch)."""
-
-    def __init__(self, n: int, seed: int) -> None:
-        self.n, self.seed, self.epoch = n, int(seed), 0
-
-    def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
-
-    def __len__(self) -> int:
-        return self.n
-
-    def __iter__(self) -> Iterator[int]:
-        g = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
-        return iter(torch.randperm(self.n, generator=g).tolist())
 
 
 class StepSeed(Callback):
@@ -88,15 +69,6 @@ class EpochStartCheckpoint(Callback):
             self._last = time.monotonic()
 
 
-def tensor_loader(x: np.ndarray, y: np.ndarray, *, batch_size: int, seed: int, shuffle: bool = True,
-                  num_workers: int = 0, drop_last: bool = False) -> DataLoader:
-    """Spectrograms (N, 64, 32) and labels (N,) as a loader of ((B, 1, 64, 32), (B,)) batches."""
-    ds = TensorDataset(torch.as_tensor(np.asarray(x, dtype=np.float32))[:, None], torch.as_tensor(np.asarray(y, dtype=np.int64)))
-    sampler = EpochSeededSampler(len(ds), seed) if shuffle else None
-    return DataLoader(ds, batch_size=min(batch_size, len(ds)), sampler=sampler, num_workers=num_workers,
-                      drop_last=drop_last, persistent_workers=num_workers > 0)
-
-
 def make_trainer(trainer_cfg: DictConfig | Mapping, *, ckpt_dir: Path, seed: int, logger: Any = False,
                  callbacks: Sequence[Callback] = (), overrides: Mapping[str, Any] | None = None,
                  checkpoint_interval_s: float = 0.0) -> pl.Trainer:
@@ -107,12 +79,14 @@ def make_trainer(trainer_cfg: DictConfig | Mapping, *, ckpt_dir: Path, seed: int
                        default_root_dir=str(ckpt_dir), enable_checkpointing=False)
 
 
-def resumable_fit(trainer: pl.Trainer, module: pl.LightningModule, loader: DataLoader, ckpt_dir: Path) -> None:
-    """``trainer.fit`` that continues from ``ckpt_dir/last.ckpt`` when an earlier fit was interrupted."""
+def resumable_fit(trainer: pl.Trainer, module: pl.LightningModule, data: pl.LightningDataModule | None,
+                  ckpt_dir: Path) -> None:
+    """``trainer.fit`` on the DataModule ``data`` (None: the module's own) that continues from
+    ``ckpt_dir/last.ckpt`` when an earlier fit was interrupted."""
     last = Path(ckpt_dir) / "last.ckpt"
     if last.is_file():
         log.info("resuming %s from %s", type(module).__name__, last)
-    trainer.fit(module, train_dataloaders=loader, ckpt_path=str(last) if last.is_file() else None)
+    trainer.fit(module, datamodule=data, ckpt_path=str(last) if last.is_file() else None)
 
 
 class TrackerLogger(Logger):

@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from handradar.data.datamodule import SpectrogramDataModule
+from handradar.data.datamodule import (
+    ArrayRows,
+    EpochSeededSampler,
+    FileRows,
+    SpectrogramDataModule,
+    TrainingRowsDataModule,
+)
+from handradar.data.datasets import load_arrays
 from handradar.data.hdf5 import open_writer, validate
 from handradar.data.splits import stratified_partition as stratified_split
 from handradar.vocab import GESTURES
@@ -104,3 +111,26 @@ def test_label_map_keeps_a_subset(dataset):
     batch = next(iter(dm.train_dataloader()))
     assert set(batch["label"].tolist()) <= {0, 1}
     assert ((labels[batch["index"].numpy()] == 7) == (batch["label"].numpy() == 1)).all()
+
+
+def test_training_rows_mix_files_and_arrays_in_a_seeded_resumable_order(fake_data):
+    real = load_arrays(fake_data)
+    rows = np.asarray([5, 1, 3])
+    extra = ArrayRows(np.full((2, 64, 32), 0.5, np.float32), np.asarray([7, 8]))
+    dm = TrainingRowsDataModule([FileRows(fake_data, rows), FileRows(fake_data, rows[:2], np.asarray([9, 9])), extra],
+                                batch_size=4, seed=3)
+    x, y = dm.arrays()
+    assert np.array_equal(x[:3], real.x[rows]) and np.array_equal(y[:3], real.y[rows])  # file rows, in order
+    assert np.array_equal(y[3:], [9, 9, 7, 8]) and np.array_equal(x[5:], extra.x)        # labels replaced; arrays
+    batches = [b for b in dm.train_dataloader()]
+    assert [len(b[1]) for b in batches] == [4, 3] and batches[0][0].shape == (4, 1, 64, 32)
+    order = list(EpochSeededSampler(len(dm), 3))
+    assert np.array_equal(torch.cat([b[1] for b in batches]).numpy(), y[order])  # the sampler's order
+    again = [b for b in TrainingRowsDataModule([FileRows(fake_data, rows), FileRows(fake_data, rows[:2], np.asarray([9, 9])),
+                                                extra], batch_size=4, seed=3).train_dataloader()]
+    assert all(torch.equal(a[0], b[0]) for a, b in zip(batches, again))  # a function of the seed alone
+    sampler = EpochSeededSampler(len(dm), 3)
+    sampler.set_epoch(1)
+    assert list(sampler) != order  # another epoch, another order
+    with pytest.raises(ValueError, match="labels for"):
+        TrainingRowsDataModule([FileRows(fake_data, rows, np.asarray([1]))], batch_size=2, seed=0)

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 import torch
 
+from handradar.data.datamodule import ArrayRows, TrainingRowsDataModule
 from handradar.models.cgan import Discriminator, Generator
 from handradar.tasks.gan import CGANModule, sample_per_class
-from handradar.training import StepSeed, tensor_loader
+from handradar.training import StepSeed
 from tests.tasks.fakes import class_pattern
 
 
@@ -52,7 +53,7 @@ def trained_generator() -> tuple[Generator, np.ndarray]:
     module = CGANModule(Generator(3), Discriminator(3), lr=2e-4)
     trainer = pl.Trainer(accelerator="cpu", max_steps=600, logger=False, enable_checkpointing=False,
                          enable_progress_bar=False, enable_model_summary=False, callbacks=[StepSeed(0)])
-    trainer.fit(module, tensor_loader(x, y, batch_size=20, seed=0))
+    trainer.fit(module, datamodule=TrainingRowsDataModule([ArrayRows(x, y)], batch_size=20, seed=0))
     means = np.stack([x[y == c].mean(0) for c in range(3)])
     return module.generator, means
 

@@ -8,7 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from handradar.runs.mlflow import Tracker, sqlite_path
+from handradar.runs.mlflow import (
+    EXPERIMENT_KIND_TAG,
+    MODEL_TRAINING,
+    DataRef,
+    Tracker,
+    sqlite_path,
+    tracked_run,
+)
 from handradar.training import TrackerLogger
 
 
@@ -96,3 +103,32 @@ def test_parallel_jobs_on_a_fresh_sqlite_store_lose_no_run(tmp_path: Path):
         assert run.info.status == "FINISHED"
         assert run.data.metrics["test/acc_radar_only"] == pytest.approx(0.5 + k / 100)
         assert len(client.get_metric_history(run.info.run_id, "radar_only/train/loss")) == 25
+
+
+def test_a_reviewer_tells_runs_apart_in_the_dashboard(tmp_path: Path):
+    """What the MLflow UI shows, read through the client: a model-training experiment, runs named after
+    preset, data and seed, the data set as the run's input, and the job's tags."""
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    client = _client(uri)
+    ids = []
+    for root, digest in (("/data/lab_a", "aaaa1111"), ("/data/lab_b", "bbbb2222")):
+        ref = DataRef.of({"root": root, "dataset": {"_target_": "x"}}, tmp_path / f"recordings-{digest}.h5", digest)
+        with tracked_run(Tracker(uri, "diagnose"), run_name=ref.run_name("diagnose", 0), tags={"preset": "diagnose"},
+                         config={"seed": 0}, dataset=ref) as rid:
+            ids.append(rid)
+    exp = client.get_experiment_by_name("diagnose")
+    assert exp.tags[EXPERIMENT_KIND_TAG] == MODEL_TRAINING  # opens as model training, not GenAI
+    runs = [client.get_run(i) for i in ids]
+    assert [r.info.run_name for r in runs] == ["diagnose-lab_a-seed0", "diagnose-lab_b-seed0"]
+    inputs = [r.inputs.dataset_inputs for r in runs]
+    assert [(d[0].dataset.name, d[0].dataset.digest) for d in inputs] == [("lab_a", "aaaa1111"), ("lab_b", "bbbb2222")]
+    assert inputs[0][0].tags[0].value == "training" and "recordings-aaaa1111.h5" in inputs[0][0].dataset.source
+    assert all(r.data.tags["handradar.preset"] == "diagnose" and r.info.status == "FINISHED" for r in runs)
+    # a file named by data.path is named after its stem; the world's cached file after itself
+    assert DataRef.of({"path": "/x/my_capture.h5"}, "/x/my_capture.h5", "d").name == "my_capture"
+    assert DataRef.of({}, "/cache/world/world-0123abcd.h5", "d").name == "world-0123abcd"
+    # an older store's experiment without the kind tag gets it on the next run
+    client.delete_experiment_tag(exp.experiment_id, EXPERIMENT_KIND_TAG)
+    assert EXPERIMENT_KIND_TAG not in client.get_experiment_by_name("diagnose").tags
+    Tracker(uri, "diagnose").start(run_name="again")
+    assert client.get_experiment_by_name("diagnose").tags[EXPERIMENT_KIND_TAG] == MODEL_TRAINING

@@ -18,13 +18,17 @@ from handradar.data.hdf5 import open_writer, read_attrs, validate
 from handradar.hand.model import HandModelConfig
 from handradar.hand.skeleton import N_BONES
 from handradar.sim.simulator import Simulator
-from handradar.synthesis.fit import Phase, load_pairs, synth_scores
+from handradar.synthesis.fit import (
+    Phase,
+    fit_weight_net,
+    load_pairs,
+    load_weight_net,
+    save_weight_net,
+    synth_scores,
+)
 from handradar.synthesis.providers import (
     cache_rows,
-    fit_weight_net,
-    load_weight_net,
     motion_window,
-    save_weight_net,
     spectrograms_of,
     synthesize_rows,
 )

@@ -1,22 +1,115 @@
-"""LightningDataModule over a ``handradar.dataset/1`` file with a seeded stratified split.
+"""LightningDataModules: the one way training jobs get their batches.
 
-The HDF5 file is never opened in ``__init__`` or ``setup`` for reading rows: each DataLoader
-worker opens it on first access (see :class:`SpectrogramH5Dataset`), so h5py handles never cross
-a fork.
+- :class:`TrainingRowsDataModule`: the classifiers' and the CGAN's training data, rows of one or
+  more dataset files (the real few-shot rows, synthetic datasets) plus in-memory samples (CGAN),
+  as ``(x (B, 1, 64, 32), y (B,))`` batches in the order of :class:`EpochSeededSampler`.
+- :class:`SpectrogramDataModule`: train / val / test loaders over one file with a seeded stratified
+  split (``handradar.data.splits.stratified_partition``), optionally with skeleton windows.
+
+:class:`EpochSeededSampler` makes an epoch's order a function of (seed, epoch) alone, so that a fit
+resumed from a checkpoint sees the same batches as an uninterrupted one. HDF5 files are never
+opened in ``__init__`` or ``setup`` for reading rows: each DataLoader worker opens them on first
+access (see :class:`SpectrogramH5Dataset`), so h5py handles never cross a fork.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import lightning as L
 import numpy as np
 import torch
-from torch.utils.data import DataLoader
+from torch.utils.data import ConcatDataset, DataLoader, Dataset, Sampler, TensorDataset
 
 from handradar.data.splits import stratified_partition
 from handradar.data.torch_dataset import SpectrogramH5Dataset
+
+
+class EpochSeededSampler(Sampler[int]):
+    """A permutation of ``range(n)`` that depends only on (seed, epoch); Lightning calls ``set_epoch``."""
+
+    def __init__(self, n: int, seed: int) -> None:
+        self.n, self.seed, self.epoch = n, int(seed), 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __iter__(self) -> Iterator[int]:
+        g = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
+        return iter(torch.randperm(self.n, generator=g).tolist())
+
+
+@dataclass(frozen=True)
+class FileRows:
+    """Rows of a dataset file; ``labels`` (one per row) replace the stored ones (e.g. a class subset)."""
+
+    path: Path
+    rows: np.ndarray | None = None  # None: every row
+    labels: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ArrayRows:
+    """Spectrograms (N, 64, 32) and labels (N,) held in memory (e.g. CGAN samples)."""
+
+    x: np.ndarray
+    y: np.ndarray
+
+
+class _XY(Dataset):
+    """``(spectrogram (1, 64, 32), label)`` pairs of file rows, read lazily in the worker."""
+
+    def __init__(self, part: FileRows) -> None:
+        self.rows = SpectrogramH5Dataset(part.path, part.rows)
+        self.labels = None if part.labels is None else torch.as_tensor(np.asarray(part.labels, dtype=np.int64))
+        if self.labels is not None and len(self.labels) != len(self.rows):
+            raise ValueError(f"{part.path}: {len(self.labels)} labels for {len(self.rows)} rows")
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __getitem__(self, i: int) -> tuple[torch.Tensor, torch.Tensor]:
+        item = self.rows[i]
+        return item["spectrogram"], item["label"] if self.labels is None else self.labels[i]
+
+
+class TrainingRowsDataModule(L.LightningDataModule):
+    """Training batches of a classifier or the CGAN from ``parts`` (file rows and arrays), in order.
+
+    Every epoch visits the concatenation of the parts in the order of :class:`EpochSeededSampler`
+    (seed, epoch); ``batch_size`` is capped at the number of rows.
+    """
+
+    def __init__(self, parts: Sequence[FileRows | ArrayRows], *, batch_size: int, seed: int, num_workers: int = 0,
+                 drop_last: bool = False) -> None:
+        super().__init__()
+        if not parts:
+            raise ValueError("a training datamodule needs at least one part")
+        self.parts = list(parts)
+        self.batch_size, self.seed = int(batch_size), int(seed)
+        self.num_workers, self.drop_last = int(num_workers), bool(drop_last)
+        self.dataset = ConcatDataset([_XY(p) if isinstance(p, FileRows) else
+                                      TensorDataset(torch.as_tensor(np.asarray(p.x, np.float32))[:, None],
+                                                    torch.as_tensor(np.asarray(p.y, np.int64))) for p in self.parts])
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def train_dataloader(self) -> DataLoader:
+        n = len(self.dataset)
+        return DataLoader(self.dataset, batch_size=min(self.batch_size, n), sampler=EpochSeededSampler(n, self.seed),
+                          num_workers=self.num_workers, drop_last=self.drop_last,
+                          persistent_workers=self.num_workers > 0)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every training row in order: spectrograms (N, 64, 32) float32 and labels (N,)."""
+        xs, ys = zip(*(self.dataset[i] for i in range(len(self.dataset))))
+        return torch.stack(xs)[:, 0].numpy(), torch.stack(ys).numpy()
 
 
 class SpectrogramDataModule(L.LightningDataModule):

@@ -35,6 +35,7 @@ Public API:
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import logging
 import time
@@ -54,6 +55,7 @@ from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import code_version, config_hash
 from handradar.runs.hydra import output_dir
 from handradar.runs.mlflow import Tracker, tracked_run
+from handradar.runs.tables import fmt_number
 from handradar.sim.factory import SimFactory
 from handradar.viz.gap import confusion_figure
 from handradar.vocab import EFFECTS
@@ -189,11 +191,8 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds}
 
 
-def _f(x, d=3, signed=True):
-    return "-" if x is None else (f"{x:+.{d}f}" if signed else f"{x:.{d}f}")
-
-
 def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, settings: Mapping) -> str:
+    sgn = functools.partial(fmt_number, signed=True)  # gap_closed figures carry their sign
     lines = ["# Gap diagnosis benchmark: withheld effects", "",
              "Each row is a reference world with one effect on (the other vocabulary effects off), diagnosed by the "
              "paper's simulator without that effect; `nothing` and `iq_imbalance` are controls whose right answer "
@@ -201,8 +200,8 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              "`make gap-benchmark` (`python diagnose.py +experiment=gap_benchmark`).", "",
              f"**Top-1 attribution: {scores['effects_correct']} of {scores['effects_total']} withheld effects; "
              f"controls: {scores['controls_correct']} of {scores['controls_total']} say none.** "
-             f"Mean gap_closed by the withheld effect: {_f(scores['mean_true_gap_closed'])}; "
-             f"by the greedy selection: {_f(scores['mean_after_gap_closed'])}.", "",
+             f"Mean gap_closed by the withheld effect: {sgn(scores['mean_true_gap_closed'])}; "
+             f"by the greedy selection: {sgn(scores['mean_after_gap_closed'])}.", "",
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "(mean / median): how visible the withheld effect is in the radar data at all. `world at another facet "
              "layout` is the gap_closed [95 % CI] of the world's own physics used as the simulator: the same worlds "
@@ -217,16 +216,16 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         ci = r["true_ci95"]
-        true = "-" if r["true_gap_closed"] is None else f"{_f(r['true_gap_closed'])} [{_f(ci[0])}, {_f(ci[1])}]"
+        true = "-" if r["true_gap_closed"] is None else f"{sgn(r['true_gap_closed'])} [{sgn(ci[0])}, {sgn(ci[1])}]"
         sig = ("-" if r.get("signature_mean") is None
-               else f"{_f(r['signature_mean'], signed=False)} / {_f(r['signature_median'], signed=False)}")
+               else f"{fmt_number(r['signature_mean'])} / {fmt_number(r['signature_median'])}")
         oracle = ("-" if r.get("oracle_gap_closed") is None else
-                  f"{_f(r['oracle_gap_closed'])} [{_f(r['oracle_ci95'][0])}, {_f(r['oracle_ci95'][1])}]")
-        lead = "-" if not r.get("lead_ci95") else f"[{_f(r['lead_ci95'][0])}, {_f(r['lead_ci95'][1])}] vs {r['runner_up']}"
+                  f"{sgn(r['oracle_gap_closed'])} [{sgn(r['oracle_ci95'][0])}, {sgn(r['oracle_ci95'][1])}]")
+        lead = "-" if not r.get("lead_ci95") else f"[{sgn(r['lead_ci95'][0])}, {sgn(r['lead_ci95'][1])}] vs {r['runner_up']}"
         lines.append(f"| {r['case']} | {r['truth']} | {r['cause']} | {'yes' if r['correct'] else 'no'} | {true} | "
-                     f"{r['true_rank'] or '-'} | {r['top_candidate']} ({_f(r['top_gap_closed'])}) | {lead} | "
-                     f"{', '.join(r['after_effects']) or '-'} ({_f(r['after_gap_closed'])}) | "
-                     f"{_f(r['baseline_ssim'], signed=False)} | {sig} | {oracle} |")
+                     f"{r['true_rank'] or '-'} | {r['top_candidate']} ({sgn(r['top_gap_closed'])}) | {lead} | "
+                     f"{', '.join(r['after_effects']) or '-'} ({sgn(r['after_gap_closed'])}) | "
+                     f"{fmt_number(r['baseline_ssim'])} | {sig} | {oracle} |")
     lines += ["", f"![confusion]({figure})", "",
               f"Settings: {settings.get('rows')} rows per world ({settings.get('split')}), "
               f"{settings.get('fit_rows')} calibration rows score the grid, seed {settings.get('seed')}; "

@@ -34,6 +34,7 @@ Public API:
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import tempfile
 import time
@@ -75,7 +76,6 @@ from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
 from handradar.sim.effects import REGISTRY
 from handradar.sim.factory import SimFactory
 from handradar.sim.features import BoneFeatures, cached_bone_features
-from handradar.sim.simulator import Simulator
 from handradar.vocab import EFFECTS
 
 log = logging.getLogger(__name__)
@@ -259,164 +259,180 @@ def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) 
     return ev
 
 
-def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConfig | Mapping | None = None, *,
-             cache_dir: str | Path | None = None, progress: bool = True) -> Diagnosis:
-    """Run the diagnosis (module doc) on ``data`` with the baseline simulator ``build(base)``."""
-    cfg = cfg if isinstance(cfg, DiagnosisConfig) else DiagnosisConfig.from_mapping(cfg)
-    base = {k: dict(v) for k, v in base.items()}
-    unknown = [n for n in (cfg.candidates or []) if n not in REGISTRY]
-    if unknown:
-        raise ValueError(f"unknown candidate effect(s) {unknown}; expected some of {sorted(REGISTRY)}")
-    order = list(EFFECTS) + sorted(set(REGISTRY) - set(EFFECTS))
-    names = [n for n in order if n not in base and (cfg.candidates is None or n in cfg.candidates)]
-    if not 0.0 < cfg.calibration_fraction < 1.0:
-        raise ValueError(f"calibration_fraction must be in (0, 1), found {cfg.calibration_fraction}")
-    f = cfg.calibration_fraction
-    cal, ev = stratified_partition(data.labels, (f, 1.0 - f), cfg.seed, every_part=True)
-    if len(ev) < 20:
-        log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
-                    "(use 30 or more)", len(ev))
-    build = build.replace(noise_draws=cfg.noise_draws)
-    fit_idx = _subset(data.labels, cal, cfg.fit_rows, cfg.seed + 1)
-    refine_idx = _subset(data.labels, cal, cfg.refine_rows, cfg.seed + 2)
-    base_sim = build(base)
-    tmp = None
-    if cache_dir is None and cfg.radarweightnet:
-        tmp = tempfile.TemporaryDirectory(prefix="handradar-gap-")
-        cache_dir = tmp.name
-    timings: dict[str, float] = {}
-    clock = [time.perf_counter()]
+class _Steps:
+    """One diagnosis run as a sequence of named steps (:data:`STEPS`) sharing its state."""
 
-    def lap(name: str) -> None:
-        now = time.perf_counter()
-        timings[name] = timings.get(name, 0.0) + now - clock[0]
-        clock[0] = now
-        log.info("%s: %.1f s", name, timings[name])
+    def __init__(self, data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConfig, cache_dir: str | Path,
+                 progress: bool) -> None:
+        self.data, self.cfg, self.cache_dir, self.progress = data, cfg, cache_dir, progress
+        self.base = {k: dict(v) for k, v in base.items()}
+        order = list(EFFECTS) + sorted(set(REGISTRY) - set(EFFECTS))
+        self.names = [n for n in order if n not in self.base and (cfg.candidates is None or n in cfg.candidates)]
+        self.build = build.replace(noise_draws=cfg.noise_draws)
+        self.base_sim = self.build(self.base)
+        self.features: BoneFeatures | None = None
+        self.features_exponent = 1.0
+        self.profiles: SlotProfileCache | None = None
+        self.report: dict = {}
 
-    def bone_features(sim: Simulator) -> BoneFeatures:
-        # visibility for the occlusion effect and RadarWeightNet's input, at the simulator's RCS exponent
-        out = cached_bone_features(data.rows.skeletons, data.rows.times, data.rows.masks, data.radar.wavelength_m,
-                                   sim.hand, cache_dir, rcs_exponent=sim.rcs_exponent, progress=progress)
-        data.rows.visibility = out.visible_fraction()
-        nonlocal features_exponent
-        features_exponent = sim.rcs_exponent
-        lap("features")
-        return out
+    def bone_features(self) -> None:
+        """Visibility (the occlusion effect) and RadarWeightNet's input, at the simulator's RCS exponent."""
+        d = self.data
+        self.features = cached_bone_features(d.rows.skeletons, d.rows.times, d.rows.masks, d.radar.wavelength_m,
+                                             self.base_sim.hand, self.cache_dir, rcs_exponent=self.base_sim.rcs_exponent,
+                                             progress=self.progress)
+        d.rows.visibility = self.features.visible_fraction()
+        self.features_exponent = self.base_sim.rcs_exponent
 
-    features_exponent = 1.0
+    # ---- the steps ---------------------------------------------------------------------------------
+    def split(self) -> None:
+        """Calibration and evaluation rows, seeded and stratified by gesture; the fitting subsets."""
+        cfg, labels = self.cfg, self.data.labels
+        f = cfg.calibration_fraction
+        self.cal, self.ev = stratified_partition(labels, (f, 1.0 - f), cfg.seed, every_part=True)
+        if len(self.ev) < 20:
+            log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
+                        "(use 30 or more)", len(self.ev))
+        self.fit_idx = _subset(labels, self.cal, cfg.fit_rows, cfg.seed + 1)
+        self.refine_idx = _subset(labels, self.cal, cfg.refine_rows, cfg.seed + 2)
 
-    try:
-        features = None
-        if "occlusion" in base:  # step 0 simulates the baseline, which then needs visibility
-            features = bone_features(base_sim)
+    def calibrate(self) -> None:
+        """Step 0: the baseline's generic calibration (module doc) before any candidate is scored."""
+        cfg, d = self.cfg, self.data
+        if "occlusion" in self.base:  # the baseline simulated below then needs visibility
+            self.bone_features()
+        self.calibration = {"rcs_exponent": 1.0, "grid": []}
+        self.exponents = list(cfg.rcs_exponents or [1.0])
+        if self.exponents != [1.0]:
+            with _bar(len(self.fit_idx) * len(self.exponents), "step 0: calibrate the RCS exponent", self.progress) as bar:
+                best, scores = calibrate_rcs_exponent(self.build, self.base, d.rows, self.fit_idx, d.measured,
+                                                      self.exponents, batch_size=cfg.batch_size, progress=bar.update)
+            self.calibration = {"rcs_exponent": best,
+                                "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(self.exponents, scores)]}
+            self.build = self.build.replace(rcs_exponent=best)
+            self.base_sim = self.build(self.base)
 
-        # ---- step 0: the baseline's generic calibration (module doc) ------------------------------------
-        calibration = {"rcs_exponent": 1.0, "grid": []}
-        exponents = list(cfg.rcs_exponents or [1.0])
-        if exponents != [1.0]:
-            with _bar(len(fit_idx) * len(exponents), "step 0: calibrate the RCS exponent", progress) as bar:
-                best, scores = calibrate_rcs_exponent(build, base, data.rows, fit_idx, data.measured, exponents,
-                                                      batch_size=cfg.batch_size, progress=bar.update)
-            calibration = {"rcs_exponent": best,
-                           "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(exponents, scores)]}
-            build = build.replace(rcs_exponent=best)
-            base_sim = build(base)
-            lap("calibration")
+    def cache(self) -> None:
+        """Bone features and the baseline's slot profiles, where the later steps need them."""
+        cfg, d = self.cfg, self.data
         # RadarWeightNet reads the RCS at the calibrated exponent; visibility alone does not depend on it
-        stale = features is None or (cfg.radarweightnet and features_exponent != base_sim.rcs_exponent)
-        if ("occlusion" in names or cfg.radarweightnet) and stale:
-            features = bone_features(base_sim)
-        profiles = None
+        stale = self.features is None or (cfg.radarweightnet and self.features_exponent != self.base_sim.rcs_exponent)
+        if ("occlusion" in self.names or cfg.radarweightnet) and stale:
+            self.bone_features()
         if cfg.radarweightnet:
-            vis = data.rows.visibility if "occlusion" in base else None
-            profiles = SlotProfileCache(cache_slot_profiles(base_sim, data.rows.skeletons, data.rows.masks, cache_dir,
-                                                            times=data.rows.times, visibility=vis,
-                                                            batch_size=cfg.batch_size, progress=progress))
-            lap("slot profile cache")
-        runner = _Runner(data, build, cfg, progress)
-        engine = VariantEngine(build, base, data.rows, batch_size=cfg.batch_size,
-                               base_profiles=None if profiles is None else profiles.profiles)
+            vis = d.rows.visibility if "occlusion" in self.base else None
+            self.profiles = SlotProfileCache(cache_slot_profiles(
+                self.base_sim, d.rows.skeletons, d.rows.masks, self.cache_dir, times=d.rows.times, visibility=vis,
+                batch_size=cfg.batch_size, progress=self.progress))
 
-        # ---- which (and where, in the same pass over the evaluation rows) ---------------------------------
-        bones = BoneResiduals()
+    def which(self) -> None:
+        """Every candidate fitted on calibration rows and scored on evaluation rows; the cause."""
+        cfg, d = self.cfg, self.data
+        self.runner = _Runner(d, self.build, cfg, self.progress)
+        engine = VariantEngine(self.build, self.base, d.rows, batch_size=cfg.batch_size,
+                               base_profiles=None if self.profiles is None else self.profiles.profiles)
+        self.bones = BoneResiduals()
         powers: dict[int, torch.Tensor] = {}
 
-        def keep_power(rows: np.ndarray, p0: torch.Tensor) -> None:
-            pw = slot_power(p0, data.chain).float()
+        def keep_power(rows: np.ndarray, p0: torch.Tensor) -> None:  # per-bone power for "where", same pass
+            pw = slot_power(p0, d.chain).float()
             for i, r in enumerate(rows):
                 powers[int(r)] = pw[i]
 
-        fits = runner.fit(engine, names, fit_idx, refine_idx, "step 1")
-        lap("fit")
-        base_spec, cands = runner.evaluate(engine, fits, ev, None, "step 1", on_base=keep_power)
-        lap("evaluate")
-        before_ssim, before_mse = runner.scores(base_spec, ev)
-        bones.add(torch.stack([powers[int(r)] for r in ev]), data.measured[ev] - base_spec, base_spec)
-        powers.clear()
-        evidence = _evidence(before_ssim, cands, cfg)
-        cause = evidence["leader"] if evidence["leader_significant"] and evidence["clearly_ahead"] else "none"
+        fits = self.runner.fit(engine, self.names, self.fit_idx, self.refine_idx, "step 1")
+        self.base_spec, self.cands = self.runner.evaluate(engine, fits, self.ev, None, "step 1", on_base=keep_power)
+        self.before_ssim, self.before_mse = self.runner.scores(self.base_spec, self.ev)
+        self.bones.add(torch.stack([powers[int(r)] for r in self.ev]), d.measured[self.ev] - self.base_spec,
+                       self.base_spec)
+        self.evidence = _evidence(self.before_ssim, self.cands, cfg)
+        lead = self.evidence["leader_significant"] and self.evidence["clearly_ahead"]
+        self.cause = self.evidence["leader"] if lead else "none"
 
-        # ---- how far: greedy forward selection -------------------------------------------------------
+    def how_far(self) -> None:
+        """Greedy forward selection from the leader while a candidate still closes a significant part."""
+        cfg, d = self.cfg, self.data
         chosen: list[Candidate] = []
-        steps: list[dict] = [{"step": 1, "base": sorted(base), "candidates": [
-            {"effect": c.effect, "gap_closed_of_remaining": c.gap_closed, "ci95": list(c.ci95)} for c in cands]}]
-        pool = [c for c in cands if c.significant(cfg.min_gap_closed)]
-        current, current_ssim, current_mse, current_spec = dict(base), before_ssim, before_mse, base_spec
+        self.selection: list[dict] = [{"step": 1, "base": sorted(self.base), "candidates": [
+            {"effect": c.effect, "gap_closed_of_remaining": c.gap_closed, "ci95": list(c.ci95)} for c in self.cands]}]
+        pool = [c for c in self.cands if c.significant(cfg.min_gap_closed)]
+        current, ssim, mse, spec = dict(self.base), self.before_ssim, self.before_mse, self.base_spec
         while pool and len(chosen) < cfg.greedy_max:
             best = pool[0]
             chosen.append(best)
             current = merge(current, {best.effect: best.params})
-            current_ssim, current_mse, current_spec = best.ssim, best.mse, best.spectrograms
+            ssim, mse, spec = best.ssim, best.mse, best.spectrograms
             rest = [c.effect for c in pool[1:]]
             if not rest or len(chosen) >= cfg.greedy_max:
                 break
             step = f"step {len(chosen) + 1}"
-            eng = VariantEngine(build, current, data.rows, batch_size=cfg.batch_size)
-            fits_k = runner.fit(eng, rest, fit_idx, refine_idx, step)
-            _, cands_k = runner.evaluate(eng, fits_k, ev, current_ssim, step)
-            steps.append({"step": len(chosen) + 1, "base": sorted(current), "candidates": [
+            eng = VariantEngine(self.build, current, d.rows, batch_size=cfg.batch_size)
+            fits_k = self.runner.fit(eng, rest, self.fit_idx, self.refine_idx, step)
+            _, cands_k = self.runner.evaluate(eng, fits_k, self.ev, ssim, step)
+            self.selection.append({"step": len(chosen) + 1, "base": sorted(current), "candidates": [
                 {"effect": c.effect, "params": c.params, "gap_closed_of_remaining": c.gap_closed, "ci95": list(c.ci95)}
                 for c in cands_k]})
             pool = [c for c in cands_k if c.significant(cfg.min_gap_closed)]
-            lap("greedy selection")
-        after = {"effects": [c.effect for c in chosen], "ssim": float(current_ssim.mean()),
-                 "mse": float(current_mse.mean()), "gap_closed": float(gap_closed(before_ssim, current_ssim)),
-                 "params": {c.effect: c.params for c in chosen}}
+        self.after_spec = spec
+        self.after = {"effects": [c.effect for c in chosen], "ssim": float(ssim.mean()), "mse": float(mse.mean()),
+                      "gap_closed": float(gap_closed(self.before_ssim, ssim)), "params": {c.effect: c.params for c in chosen}}
 
-        # ---- where ----------------------------------------------------------------------------------
-        dop, tim = residual_profiles(data.measured[ev], base_spec)
-        ev_meta = {k: v[ev] for k, v in data.meta.items()}
+    def where(self) -> None:
+        """Residual profiles over Doppler and time, SSIM by factor, per reflection point; the report."""
+        cfg, d, ev = self.cfg, self.data, self.ev
+        dop, tim = residual_profiles(d.measured[ev], self.base_spec)
+        self.ev_meta = {k: v[ev] for k, v in d.meta.items()}
         where = {"doppler_profile": [float(v) for v in dop], "time_profile": [float(v) for v in tim],
-                 "by_factor": by_factor(before_ssim, ev_meta, FACTORS), "reflection_points": bones.result()}
+                 "by_factor": by_factor(self.before_ssim, self.ev_meta, FACTORS), "reflection_points": self.bones.result()}
+        self.report = {"format": FORMAT, "n_calibration": int(len(self.cal)), "n_evaluation": int(len(ev)),
+                       "baseline": {"ssim": float(self.before_ssim.mean()), "mse": float(self.before_mse.mean()),
+                                    "effects": {k: self.base_sim.effect(k).values() for k in self.base},
+                                    "calibration": self.calibration},
+                       "where": where,
+                       "candidates": [c.entry(cfg.min_gap_closed) for c in self.cands],
+                       "cause": self.cause,
+                       "after": self.after,
+                       "evidence": self.evidence,
+                       "excluded": self.runner.excluded,
+                       "selection": self.selection,
+                       "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
+                                    "fit_rows": int(len(self.fit_idx)), "refine_steps": cfg.refine_steps,
+                                    "rcs_exponents": self.exponents, "grids": cfg.grids or {},
+                                    "n_boot": cfg.n_boot, "min_gap_closed": cfg.min_gap_closed}}
 
-        report = {"format": FORMAT, "n_calibration": int(len(cal)), "n_evaluation": int(len(ev)),
-                  "baseline": {"ssim": float(before_ssim.mean()), "mse": float(before_mse.mean()),
-                               "effects": {k: base_sim.effect(k).values() for k in base},
-                               "calibration": calibration},
-                  "where": where,
-                  "candidates": [c.entry(cfg.min_gap_closed) for c in cands],
-                  "cause": cause,
-                  "after": after,
-                  "evidence": evidence,
-                  "excluded": runner.excluded,
-                  "selection": steps,
-                  "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
-                               "fit_rows": int(len(fit_idx)), "refine_steps": cfg.refine_steps,
-                               "rcs_exponents": exponents, "grids": cfg.grids or {},
-                               "n_boot": cfg.n_boot, "min_gap_closed": cfg.min_gap_closed}}
-        result = Diagnosis(report, cal, ev, data.measured[ev], base_spec,
-                           {c.effect: c.spectrograms for c in cands}, current_spec, None, ev_meta)
+    def readout(self) -> None:
+        """How much a RadarWeightNet trained on the calibration rows closes (handradar.gap.rwn)."""
+        cfg = self.cfg
+        self.rwn_spec = None
+        if cfg.radarweightnet and self.features is not None and self.profiles is not None:
+            train_idx = _subset(self.data.labels, self.cal, cfg.rwn_rows, cfg.seed + 3)
+            self.report["radarweightnet"], self.rwn_spec = rwn_readout(
+                self.data, self.build, self.base, self.features, self.profiles, train_idx, self.ev, self.before_ssim,
+                self.cands, cfg, progress=self.progress)
 
-        # ---- RadarWeightNet readout ------------------------------------------------------------------
-        if cfg.radarweightnet and features is not None and profiles is not None:
-            train_idx = _subset(data.labels, cal, cfg.rwn_rows, cfg.seed + 3)
-            readout, rwn_spec = rwn_readout(data, build, base, features, profiles, train_idx, ev, before_ssim,
-                                            cands, cfg, progress=progress)
-            report["radarweightnet"] = readout
-            result.rwn = rwn_spec
-            lap("radarweightnet")
-        report["timings_s"] = {k: round(v, 2) for k, v in timings.items()}
-        return result
-    finally:
-        if tmp is not None:
-            tmp.cleanup()
+
+# The diagnosis, in order; each is a method of _Steps, and its wall time is reported under its name.
+STEPS = ("split", "calibrate", "cache", "which", "how_far", "where", "readout")
+
+
+def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConfig | Mapping | None = None, *,
+             cache_dir: str | Path | None = None, progress: bool = True) -> Diagnosis:
+    """Run the diagnosis (module doc, :data:`STEPS`) on ``data`` with the baseline simulator ``build(base)``."""
+    cfg = cfg if isinstance(cfg, DiagnosisConfig) else DiagnosisConfig.from_mapping(cfg)
+    unknown = [n for n in (cfg.candidates or []) if n not in REGISTRY]
+    if unknown:
+        raise ValueError(f"unknown candidate effect(s) {unknown}; expected some of {sorted(REGISTRY)}")
+    if not 0.0 < cfg.calibration_fraction < 1.0:
+        raise ValueError(f"calibration_fraction must be in (0, 1), found {cfg.calibration_fraction}")
+    with contextlib.ExitStack() as stack:
+        if cache_dir is None and cfg.radarweightnet:
+            cache_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="handradar-gap-"))
+        run = _Steps(data, build, base, cfg, cache_dir, progress)
+        timings: dict[str, float] = {}
+        for name in STEPS:
+            t0 = time.perf_counter()
+            getattr(run, name)()
+            timings[name] = round(time.perf_counter() - t0, 2)
+            log.info("%s: %.1f s", name, timings[name])
+        run.report["timings_s"] = timings
+        return Diagnosis(run.report, run.cal, run.ev, data.measured[run.ev], run.base_spec,
+                         {c.effect: c.spectrograms for c in run.cands}, run.after_spec, run.rwn_spec, run.ev_meta)

@@ -32,7 +32,7 @@ from handradar.provenance import code_version
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.runs.hydra import output_dir
-from handradar.runs.mlflow import TAG_PREFIX, Tracker, tracked_run
+from handradar.runs.mlflow import TAG_PREFIX, DataRef, Tracker, tracked_run
 from handradar.sim.factory import SimFactory
 from handradar.viz.gap import diagnosis_figures
 
@@ -82,8 +82,9 @@ def run(cfg: DictConfig) -> Path:
     tags = {"preset": cfg.task_name, "seed": cfg.diagnose.seed, "data_path": path, "data_hash": file_hash(path),
             "code_version": code_version(), "run_dir": out}
     tracker = instantiate(cfg.logger) if cfg.get("logger") else Tracker("", "", enabled=False)
-    with tracked_run(tracker, run_name=f"{cfg.task_name}-seed{cfg.diagnose.seed}", tags=tags,
-                     config=OmegaConf.to_container(cfg, resolve=True)):
+    ref = DataRef.of(OmegaConf.to_container(cfg.data, resolve=True), path, tags["data_hash"])
+    with tracked_run(tracker, run_name=ref.run_name(cfg.task_name, cfg.diagnose.seed), tags=tags,
+                     config=OmegaConf.to_container(cfg, resolve=True), dataset=ref):
         diag = diagnose(data, build, build.effects, OmegaConf.to_container(cfg.diagnose, resolve=True),
                         cache_dir=Path(cfg.paths.cache_dir) / "gap", progress=bool(cfg.get("progress", True)))
         paths = write_outputs(diag, out, radar, chain, str(path))

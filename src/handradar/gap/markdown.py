@@ -4,11 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
-def _f(x: float | None, digits: int = 3, signed: bool = False) -> str:
-    if x is None:
-        return "-"
-    return f"{x:+.{digits}f}" if signed else f"{x:.{digits}f}"
+from handradar.runs.tables import fmt_number
 
 
 def _params(p: dict) -> str:
@@ -19,7 +15,7 @@ def _calibration(cal: dict | None) -> str:
     """The baseline's generic calibration, as a clause of the baseline line."""
     if not cal or not cal.get("grid"):
         return " (the paper's cylinder RCS, not calibrated)"
-    tried = ", ".join(f"{g['rcs_exponent']:g}: {_f(g['ssim'])}" for g in cal["grid"])
+    tried = ", ".join(f"{g['rcs_exponent']:g}: {fmt_number(g['ssim'])}" for g in cal["grid"])
     return (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
             f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
 
@@ -36,11 +32,11 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
     lines += [f"- Baseline simulator effects: {effects}",
               f"- Rows: {report['n_calibration']} calibration (effect parameters are fitted here), "
               f"{report['n_evaluation']} evaluation (every number below)",
-              f"- Baseline: SSIM {_f(base['ssim'])}, MSE {_f(base['mse'], 5)}, gap = 1 - SSIM = {_f(1 - base['ssim'])}"
+              f"- Baseline: SSIM {fmt_number(base['ssim'])}, MSE {fmt_number(base['mse'], 5)}, gap = 1 - SSIM = {fmt_number(1 - base['ssim'])}"
               + _calibration(base.get("calibration")),
               f"- **Cause: {report['cause']}**",
-              f"- After adding {', '.join(after['effects']) or 'nothing'}: SSIM {_f(after['ssim'])}, "
-              f"gap closed {_f(after['gap_closed'], signed=True)}", ""]
+              f"- After adding {', '.join(after['effects']) or 'nothing'}: SSIM {fmt_number(after['ssim'])}, "
+              f"gap closed {fmt_number(after['gap_closed'], signed=True)}", ""]
     lines += ["## Where", "",
               "Signed mean residual (measured - simulated, spectrogram units): positive where the measurement has "
               "energy the simulator misses.", ""]
@@ -52,28 +48,28 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
     for factor, levels in by.items():
         if levels:
             worst = min(levels, key=lambda k: levels[k]["ssim"])
-            lines.append(f"- {factor}: lowest SSIM at {worst} ({_f(levels[worst]['ssim'])}, n={levels[worst]['n']})")
+            lines.append(f"- {factor}: lowest SSIM at {worst} ({fmt_number(levels[worst]['ssim'])}, n={levels[worst]['n']})")
     rp = report["where"]["reflection_points"]
     if rp:
         top = sorted(rp.items(), key=lambda kv: -abs(kv[1]))[:5]
         lines += ["", "Reflection points (share-weighted mean residual over the pixels each bone's simulated "
                       "power shows in; + missing energy, - excess), largest first: "
-                  + ", ".join(f"{k} {_f(v, signed=True)}" for k, v in top), ""]
+                  + ", ".join(f"{k} {fmt_number(v, signed=True)}" for k, v in top), ""]
         if "bones" in rel:
             lines += [f"![bones]({rel['bones']})", ""]
     lines += ["## Which", "",
               "| effect | fitted parameters | SSIM | gap_closed | 95 % CI | significant | signature r |",
               "|---|---|---|---|---|---|---|"]
     for c in report["candidates"]:
-        lines.append(f"| {c['effect']} | {_params(c['params'])} | {_f(c['ssim'])} | {_f(c['gap_closed'], signed=True)} | "
-                     f"[{_f(c['ci95'][0], signed=True)}, {_f(c['ci95'][1], signed=True)}] | "
-                     f"{'yes' if c.get('significant') else 'no'} | {_f(c.get('signature_correlation'), 2, True)} |")
+        lines.append(f"| {c['effect']} | {_params(c['params'])} | {fmt_number(c['ssim'])} | {fmt_number(c['gap_closed'], signed=True)} | "
+                     f"[{fmt_number(c['ci95'][0], signed=True)}, {fmt_number(c['ci95'][1], signed=True)}] | "
+                     f"{'yes' if c.get('significant') else 'no'} | {fmt_number(c.get('signature_correlation'), 2, True)} |")
     lines.append("")
     if ev:
         lines += [f"Rule: {ev.get('rule', '')}.", ""]
         if ev.get("leader"):
-            lead = (f"lead over {ev['runner_up']} {_f(ev['lead'], signed=True)} "
-                    f"[{_f(ev['lead_ci95'][0], signed=True)}, {_f(ev['lead_ci95'][1], signed=True)}]"
+            lead = (f"lead over {ev['runner_up']} {fmt_number(ev['lead'], signed=True)} "
+                    f"[{fmt_number(ev['lead_ci95'][0], signed=True)}, {fmt_number(ev['lead_ci95'][1], signed=True)}]"
                     if ev.get("runner_up") else "no runner-up")
             lines += [f"Evidence: leader {ev['leader']} (significant: {'yes' if ev['leader_significant'] else 'no'}), "
                       f"{lead} (clearly ahead: {'yes' if ev['clearly_ahead'] else 'no'}).", ""]
@@ -83,21 +79,21 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
     lines += ["## How far", "", "Greedy forward selection (each step refits the remaining significant candidates on "
               "calibration given those chosen; gap_closed of the remaining gap):", ""]
     for step in report.get("selection", []):
-        items = ", ".join(f"{c['effect']} {_f(c['gap_closed_of_remaining'], signed=True)}" for c in step["candidates"])
+        items = ", ".join(f"{c['effect']} {fmt_number(c['gap_closed_of_remaining'], signed=True)}" for c in step["candidates"])
         lines.append(f"- step {step['step']} (base: {', '.join(step['base']) or 'baseline'}): {items or '-'}")
-    lines += ["", f"After: effects {after['effects'] or '[]'}, SSIM {_f(after['ssim'])}, MSE {_f(after['mse'], 5)}, "
-              f"gap closed {_f(after['gap_closed'], signed=True)}.", ""]
+    lines += ["", f"After: effects {after['effects'] or '[]'}, SSIM {fmt_number(after['ssim'])}, MSE {fmt_number(after['mse'], 5)}, "
+              f"gap closed {fmt_number(after['gap_closed'], signed=True)}.", ""]
     rwn = report.get("radarweightnet")
     if rwn:
-        corr = ", ".join(f"{k} {_f(v, 2, True)}" for k, v in rwn.get("weight_correlation", {}).items() if v is not None)
+        corr = ", ".join(f"{k} {fmt_number(v, 2, True)}" for k, v in rwn.get("weight_correlation", {}).items() if v is not None)
         lines += ["## RadarWeightNet readout", "",
                   f"Trained {rwn['epochs']} epochs on {rwn['train_rows']} calibration rows (SSIM loss, cached slot "
-                  f"profiles): SSIM {_f(rwn['ssim'])}, gap closed {_f(rwn['gap_closed'], signed=True)} "
-                  f"[{_f(rwn['ci95'][0], signed=True)}, {_f(rwn['ci95'][1], signed=True)}]."]
+                  f"profiles): SSIM {fmt_number(rwn['ssim'])}, gap closed {fmt_number(rwn['gap_closed'], signed=True)} "
+                  f"[{fmt_number(rwn['ci95'][0], signed=True)}, {fmt_number(rwn['ci95'][1], signed=True)}]."]
         if rwn.get("best_effect"):
-            lines.append(f"Against the best physical effect ({rwn['best_effect']}, {_f(rwn['best_effect_gap_closed'], signed=True)}): "
-                         f"difference {_f(rwn['minus_best_effect'], signed=True)} "
-                         f"[{_f(rwn['minus_best_effect_ci95'][0], signed=True)}, {_f(rwn['minus_best_effect_ci95'][1], signed=True)}].")
+            lines.append(f"Against the best physical effect ({rwn['best_effect']}, {fmt_number(rwn['best_effect_gap_closed'], signed=True)}): "
+                         f"difference {fmt_number(rwn['minus_best_effect'], signed=True)} "
+                         f"[{fmt_number(rwn['minus_best_effect_ci95'][0], signed=True)}, {fmt_number(rwn['minus_best_effect_ci95'][1], signed=True)}].")
         lines += [f"Learned per-bone log weights vs each effect's per-bone log amplitude change (Pearson r): "
                   f"{corr or 'no effect changes bone amplitudes'}; most correlated: {rwn.get('most_correlated') or '-'}.", ""]
     if "examples" in rel:

@@ -18,11 +18,13 @@ not import torch or Lightning (the table builder and the tests' worker processes
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import math
 import os
 import time
 from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -31,6 +33,8 @@ T = TypeVar("T")
 
 MAX_PARAM_LEN = 500  # MLflow's limit on a parameter value
 TAG_PREFIX = "handradar."
+# MLflow 3's UI opens an experiment by its kind; without the tag it guesses GenAI for new stores.
+EXPERIMENT_KIND_TAG, MODEL_TRAINING = "mlflow.experimentKind", "custom_model_development"
 
 
 def sqlite_path(tracking_uri: str) -> Path | None:
@@ -135,9 +139,12 @@ class Tracker:
             exp = client.get_experiment_by_name(self.experiment_name)
             if exp is None:
                 location = None if self.artifact_location is None else Path(self.artifact_location).resolve().as_uri()
-                exp_id = client.create_experiment(self.experiment_name, artifact_location=location)
+                exp_id = client.create_experiment(self.experiment_name, artifact_location=location,
+                                                  tags={EXPERIMENT_KIND_TAG: MODEL_TRAINING})
             else:
                 exp_id = exp.experiment_id
+                if exp.tags.get(EXPERIMENT_KIND_TAG) != MODEL_TRAINING:  # stores made before the tag existed
+                    client.set_experiment_tag(exp_id, EXPERIMENT_KIND_TAG, MODEL_TRAINING)
             return client.create_run(exp_id, run_name=run_name, tags=dict(tags or {})).info.run_id
 
         self.run_id = self._call(start)
@@ -190,17 +197,49 @@ class Tracker:
         if self.enabled:
             self._call(lambda c: c.log_artifact(self.run_id, str(path), artifact_path))
 
+    def log_dataset(self, name: str, digest: str, source: str | Path, context: str = "training") -> None:
+        """The run's input data as an MLflow dataset input (the UI's Dataset column): its name, content
+        digest and location."""
+        if not self.enabled:
+            return
+        from mlflow.entities import Dataset, DatasetInput, InputTag
+
+        ds = Dataset(name=name, digest=digest, source_type="local", source=json.dumps({"uri": str(source)}))
+        item = DatasetInput(ds, tags=[InputTag("mlflow.data.context", context)])
+        self._call(lambda c: c.log_inputs(self.run_id, datasets=[item]))
+
     def log_dict(self, obj: Any, name: str) -> None:
         if self.enabled:
             self._call(lambda c: c.log_dict(self.run_id, obj, name))
 
 
+@dataclass(frozen=True)
+class DataRef:
+    """The dataset a run reads: a readable name, its content digest and where it lies."""
+
+    name: str
+    digest: str
+    path: Path
+
+    @classmethod
+    def of(cls, data_cfg: Mapping | None, path: str | Path, digest: str) -> DataRef:
+        """Named after the recordings folder (``data.root``) or the file (``data.path``) a job was
+        pointed at, else after the file itself (the reference world's cached dataset)."""
+        d = dict(data_cfg or {})
+        label = Path(str(d["root"])).name if d.get("root") else Path(str(d.get("path") or path)).stem
+        return cls(label, digest, Path(path))
+
+    def run_name(self, preset: str, seed: int) -> str:
+        """``<preset>-<data>-seed<seed>``: runs of one preset on several data sets are told apart."""
+        return f"{preset}-{self.name}-seed{seed}"
+
+
 @contextlib.contextmanager
 def tracked_run(tracker: Tracker, *, run_name: str, tags: Mapping[str, Any], config: Mapping | None = None,
-                run_id: str | None = None) -> Iterator[str | None]:
+                run_id: str | None = None, dataset: DataRef | None = None) -> Iterator[str | None]:
     """A job's MLflow run: started (or resumed when ``run_id`` is in the store) with ``handradar.``
-    tags and the resolved ``config`` (params + ``config.yaml``), ended FINISHED, or KILLED / FAILED
-    when the job raises. Yields the run id (None for a disabled tracker)."""
+    tags, the resolved ``config`` (params + ``config.yaml``) and its ``dataset`` as an input, ended
+    FINISHED, or KILLED / FAILED when the job raises. Yields the run id (None for a disabled tracker)."""
     prefixed = {f"{TAG_PREFIX}{k}": str(v) for k, v in tags.items()}
     rid = tracker.start(run_id=run_id, run_name=run_name, tags=prefixed)
     if tracker.enabled:
@@ -208,6 +247,8 @@ def tracked_run(tracker: Tracker, *, run_name: str, tags: Mapping[str, Any], con
         if config is not None:
             tracker.log_params(config)
             tracker.log_dict(dict(config), "config.yaml")
+        if dataset is not None and rid != run_id:  # a new run (a resumed one has its input)
+            tracker.log_dataset(dataset.name, dataset.digest, dataset.path)
     try:
         yield rid
     except BaseException as exc:

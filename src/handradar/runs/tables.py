@@ -87,6 +87,13 @@ def stats(values: Sequence[float]) -> tuple[float, float, int]:
     return m, s, n
 
 
+def fmt_number(x: float | None, digits: int = 3, signed: bool = False) -> str:
+    """A number for a markdown table: ``digits`` decimals, with its sign when ``signed``; None as "-"."""
+    if x is None:
+        return "-"
+    return f"{x:+.{digits}f}" if signed else f"{x:.{digits}f}"
+
+
 def mean_std(values: Sequence[float]) -> str:
     m, s, n = stats(values)
     if n == 0:

@@ -12,11 +12,14 @@ loader is rebuilt every epoch with the phase's batch size. Shuffling depends onl
 
 Public API:
 
-    Phase(epochs, lr, batch_size)
+    Phase(epochs, lr, batch_size);  PAPER_SCHEDULE;  schedule(config phases) -> tuple[Phase, ...]
     Pairs / load_pairs(caches, targets (N, 64, 32), rows) -> Pairs     in-memory training data
-    SynthFitModule(sim, net, train: Pairs, phases, seed)                 the LightningModule
+    PairsDataModule(train: Pairs, phases, seed)                          the training batches
+    SynthFitModule(sim, net, phases)                                     the LightningModule
+    fit_weight_net(sim, train: Pairs, *, phases, seed, ...) -> RadarWeightNet   the one training loop
     predict(sim, net | None, pairs, batch_size=32) -> (N, 64, 32)         None: modelling only
     synth_scores(sim, net, pairs) -> {"ssim_model", "ssim_enhanced", "mse_model", "mse_enhanced"}
+    save_weight_net(path, net, sim, net_kwargs) / load_weight_net(path) -> (net, info)
 """
 
 from __future__ import annotations
@@ -30,15 +33,16 @@ import lightning.pytorch as pl
 import numpy as np
 import torch
 from omegaconf import DictConfig, OmegaConf
-from torch.utils.data import DataLoader, TensorDataset
+from torch.utils.data import DataLoader, Dataset
 
 from handradar.atomic import atomic_path
+from handradar.data.datamodule import EpochSeededSampler
 from handradar.errors import FormatError
 from handradar.metrics import fast_ssim_loss, per_example_mse, per_example_ssim
 from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.sim.cache import DatasetCaches, unpack
 from handradar.sim.simulator import Simulator
-from handradar.training import EpochSeededSampler, EpochStartCheckpoint, StepSeed
+from handradar.training import EpochStartCheckpoint, StepSeed
 
 
 @dataclass(frozen=True)
@@ -115,38 +119,64 @@ def synth_scores(sim: Simulator, net: RadarWeightNet, pairs: Pairs) -> dict[str,
     return out
 
 
+def _checked(phases: Sequence[Phase | dict]) -> tuple[Phase, ...]:
+    if not phases:
+        raise ValueError("the optimisation schedule needs at least one phase")
+    return tuple(p if isinstance(p, Phase) else Phase(**p) for p in phases)
+
+
+def phase_of(phases: Sequence[Phase], epoch: int) -> Phase:
+    """The schedule's phase of ``epoch`` (the last phase after the schedule's end)."""
+    for p in phases:
+        if epoch < p.epochs:
+            return p
+        epoch -= p.epochs
+    return phases[-1]
+
+
+class _PairRows(Dataset):
+    def __init__(self, pairs: Pairs) -> None:
+        self.pairs = pairs
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        p = self.pairs
+        return {"row": torch.tensor(int(p.rows[i])), "features": p.features[i], "masks": p.masks[i],
+                "profiles": p.profiles[i], "active": p.active[i], "targets": p.targets[i]}
+
+
+class PairsDataModule(pl.LightningDataModule):
+    """RadarWeightNet's training batches: rows of the dataset caches (features, slot profiles) with their
+    measured spectrograms, in the order of EpochSeededSampler (seed, epoch), at the batch size of each
+    epoch's phase (the trainer reloads the loader every epoch)."""
+
+    def __init__(self, train: Pairs, phases: Sequence[Phase] = PAPER_SCHEDULE, seed: int = 0) -> None:
+        super().__init__()
+        self.train, self.phases, self.seed = train, _checked(phases), int(seed)
+
+    def train_dataloader(self) -> DataLoader:
+        epoch = self.trainer.current_epoch if self.trainer is not None else 0
+        n = len(self.train)
+        return DataLoader(_PairRows(self.train), batch_size=min(phase_of(self.phases, epoch).batch_size, n),
+                          sampler=EpochSeededSampler(n, self.seed))
+
+
 class SynthFitModule(pl.LightningModule):
     """Trains RadarWeightNet (the simulator is fixed) with the SSIM loss, phase by phase."""
 
-    def __init__(self, sim: Simulator, net: RadarWeightNet, train: Pairs, phases: Sequence[Phase] = PAPER_SCHEDULE,
-                 seed: int = 0) -> None:
+    def __init__(self, sim: Simulator, net: RadarWeightNet, phases: Sequence[Phase] = PAPER_SCHEDULE) -> None:
         super().__init__()
-        if not phases:
-            raise ValueError("the optimisation schedule needs at least one phase")
-        self.sim, self.net, self.train_pairs = sim, net, train
-        self.phases = tuple(p if isinstance(p, Phase) else Phase(**p) for p in phases)
-        self.seed = int(seed)
+        self.sim, self.net, self.phases = sim, net, _checked(phases)
         self.sim.requires_grad_(False)
 
     @property
     def total_epochs(self) -> int:
         return sum(p.epochs for p in self.phases)
 
-    def phase(self, epoch: int) -> Phase:
-        for p in self.phases:
-            if epoch < p.epochs:
-                return p
-            epoch -= p.epochs
-        return self.phases[-1]
-
-    def train_dataloader(self) -> DataLoader:
-        epoch = self.trainer.current_epoch if self._trainer is not None else 0
-        n = len(self.train_pairs)
-        return DataLoader(TensorDataset(torch.arange(n)), batch_size=min(self.phase(epoch).batch_size, n),
-                          sampler=EpochSeededSampler(n, self.seed))
-
-    def training_step(self, batch: list[torch.Tensor], batch_idx: int) -> torch.Tensor:
-        p = self.train_pairs.subset(batch[0])
+    def training_step(self, batch: dict[str, torch.Tensor], batch_idx: int) -> torch.Tensor:
+        p = Pairs(rows=batch["row"].numpy(), **{k: v for k, v in batch.items() if k != "row"})
         loss = fast_ssim_loss(_spectrograms(self.sim, self.net, p), p.targets)
         self.log("synth/train_loss", loss, on_step=False, on_epoch=True, batch_size=len(p))
         return loss
@@ -154,7 +184,7 @@ class SynthFitModule(pl.LightningModule):
     def configure_optimizers(self):
         opt = torch.optim.Adam(self.net.parameters(), lr=self.phases[0].lr)
         lr0 = self.phases[0].lr
-        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda epoch: self.phase(epoch).lr / lr0)
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda epoch: phase_of(self.phases, epoch).lr / lr0)
         return {"optimizer": opt, "lr_scheduler": {"scheduler": sched, "interval": "epoch"}}
 
 
@@ -179,7 +209,8 @@ def fit_weight_net(sim: Simulator, train: Pairs, *, phases: Sequence[Phase] = PA
     one training loop of every RadarWeightNet fit (synth_fit, the enhanced variants, the diagnosis readout)."""
     pl.seed_everything(seed, verbose=False)
     net = RadarWeightNet(**(net_kwargs or {}))
-    module = SynthFitModule(sim, net, train, phases, seed=seed)
+    module = SynthFitModule(sim, net, phases)
+    data = PairsDataModule(train, phases, seed)
     cbs = [*callbacks, StepSeed(seed)]
     if ckpt_dir is not None:
         cbs.append(EpochStartCheckpoint(ckpt_dir))
@@ -189,7 +220,7 @@ def fit_weight_net(sim: Simulator, train: Pairs, *, phases: Sequence[Phase] = PA
                          enable_checkpointing=False, callbacks=cbs,
                          default_root_dir=str(ckpt_dir) if ckpt_dir else None, **kw)
     last = Path(ckpt_dir) / "last.ckpt" if ckpt_dir is not None else None
-    trainer.fit(module, ckpt_path=str(last) if last is not None and last.is_file() else None)
+    trainer.fit(module, datamodule=data, ckpt_path=str(last) if last is not None and last.is_file() else None)
     return net.eval()
 
 

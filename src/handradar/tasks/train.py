@@ -45,21 +45,23 @@ from lightning.fabric.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_path, atomic_write_text
+from handradar.data.datamodule import ArrayRows, FileRows, TrainingRowsDataModule
 from handradar.data.datasets import (
     ArrayDataset,
     file_hash,
     import_callable,
     load_arrays,
 )
+from handradar.data.hdf5 import read_attrs
 from handradar.data.splits import Split, few_shot_split, make_split
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import code_version, config_hash
-from handradar.runs.mlflow import Tracker, flatten, tracked_run
+from handradar.runs.mlflow import DataRef, Tracker, flatten, tracked_run
 from handradar.runs.tables import job_table
 from handradar.synthesis.providers import load_synthetic
 from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
 from handradar.tasks.gan import CGANModule, sample_per_class
-from handradar.training import TrackerLogger, make_trainer, resumable_fit, tensor_loader
+from handradar.training import TrackerLogger, make_trainer, resumable_fit
 from handradar.viz.confusion import plot_confusion
 
 log = logging.getLogger(__name__)
@@ -92,6 +94,12 @@ def weights_hash(net: torch.nn.Module) -> str:
         h.update(k.encode())
         h.update(v.detach().cpu().contiguous().numpy().tobytes())
     return h.hexdigest()[:16]
+
+
+def _rows(part: FileRows | ArrayRows) -> int:
+    if isinstance(part, ArrayRows):
+        return len(part.y)
+    return read_attrs(part.path)["n"] if part.rows is None else len(part.rows)
 
 
 def _is_rank_zero() -> bool:
@@ -133,8 +141,9 @@ class Job:
             tags = {"preset": cfg.task_name, "seed": self.seed, "job_hash": jhash, "data_hash": data_hash,
                     "code_version": code_version(), "run_dir": self.run_dir, "data_path": real_path}
             config = OmegaConf.to_container(cfg, resolve=True) if self.rank_zero else None
-            with tracked_run(self.tracker, run_name=f"{cfg.task_name}-seed{self.seed}", tags=tags, config=config,
-                             run_id=previous.get("mlflow_run_id")) as run_id:
+            data = DataRef.of(OmegaConf.to_container(cfg.data, resolve=True), real_path, data_hash)
+            with tracked_run(self.tracker, run_name=data.run_name(cfg.task_name, self.seed), tags=tags, config=config,
+                             run_id=previous.get("mlflow_run_id"), dataset=data) as run_id:
                 if self.rank_zero:
                     atomic_write_text(job_file, json.dumps({"job_hash": jhash, "mlflow_run_id": run_id,
                                                             "run_dirs": [*previous.get("run_dirs", []), str(self.run_dir)]},
@@ -209,9 +218,10 @@ class Job:
         accel = str(self.cfg.trainer.get("accelerator", "cpu"))
         return "cuda" if accel in ("gpu", "cuda", "auto") and torch.cuda.is_available() else "cpu"
 
-    def fit_classifier(self, name: str, x: np.ndarray, y: np.ndarray, num_classes: int, *,
+    def fit_classifier(self, name: str, parts: list[FileRows | ArrayRows], num_classes: int, *,
                        init: dict[str, torch.Tensor] | None = None, overrides: dict | None = None) -> torch.nn.Module:
-        """Train ``model.net`` on (x, y), resumably; the same initial weights for every variant of a seed."""
+        """Train ``model.net`` on the training ``parts`` (through a DataModule), resumably; the same
+        initial weights for every variant of a seed."""
         cfg = self.cfg
         pl.seed_everything(self.seed, verbose=False)
         net = instantiate(cfg.model.net, num_classes=num_classes)
@@ -221,24 +231,25 @@ class Job:
                 raise RuntimeError(f"pre-trained weights do not fit {name}: missing {missing}, unexpected {unexpected}")
         scheduler = instantiate(cfg.model.scheduler) if cfg.model.get("scheduler") else None
         module = ClassifierModule(net, num_classes, instantiate(cfg.model.optimizer), scheduler, prefix=f"{name}/")
-        loader = tensor_loader(x, y, batch_size=int(cfg.data.batch_size), seed=self.seed,
-                               num_workers=int(cfg.data.num_workers))
+        data = TrainingRowsDataModule(parts, batch_size=int(cfg.data.batch_size), seed=self.seed,
+                                      num_workers=int(cfg.data.num_workers))
         ckpt_dir = self.state / name / "checkpoints"
         trainer = make_trainer(cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
                                callbacks=self._callbacks(), overrides=overrides,
                                checkpoint_interval_s=float(cfg.get("checkpoint_interval_s", 0)))
-        resumable_fit(trainer, module, loader, ckpt_dir)
+        resumable_fit(trainer, module, data, ckpt_dir)
         if cfg.model.get("precise_bn", True):
-            recompute_bn_stats(module.net, x, device=self._eval_device())
+            recompute_bn_stats(module.net, data.arrays()[0], device=self._eval_device())
         return module.net
 
-    def train_and_test(self, name: str, x: np.ndarray, y: np.ndarray, test_rows: np.ndarray, num_classes: int,
+    def train_and_test(self, name: str, parts: list[FileRows | ArrayRows], test_rows: np.ndarray, num_classes: int,
                        classes: list[str], *, test_y: np.ndarray | None = None, **kw) -> dict:
-        net = self.fit_classifier(name, x, y, num_classes, **kw)
+        net = self.fit_classifier(name, parts, num_classes, **kw)
         ty = self.real.y[test_rows] if test_y is None else test_y
         acc, cm = evaluate(net, self.real.x[test_rows], ty, num_classes, device=self._eval_device())
         log.info("%s: test accuracy %.4f on %d rows", name, acc, len(ty))
-        return {"acc": acc, "confusion": cm.tolist(), "classes": classes, "n_train": int(len(y)), "n_test": int(len(ty)),
+        return {"acc": acc, "confusion": cm.tolist(), "classes": classes, "n_train": sum(_rows(p) for p in parts),
+                "n_test": int(len(ty)),
                 "weights_hash": weights_hash(net)}
 
     # ---- few-shot and OOD variants ----------------------------------------------------------
@@ -262,27 +273,27 @@ class Job:
                 raise ValueError(f"unknown variant {name!r}; choose from {VARIANTS}")
 
             def compute(name: str = name) -> dict:
-                x, y = real.x[split.train], real.y[split.train]
-                extra_x, extra_y = self.extra_data(name, split)
-                return {**self.train_and_test(name, np.concatenate([x, extra_x]), np.concatenate([y, extra_y]), split.test,
-                                              n_classes, real.classes), "n_real": int(len(y)), "n_extra": int(len(extra_y))}
+                extra = self.extra_data(name, split)
+                parts = [FileRows(real.path, split.train), *extra]
+                return {**self.train_and_test(name, parts, split.test, n_classes, real.classes),
+                        "n_real": int(len(split.train)), "n_extra": sum(_rows(p) for p in extra)}
 
             results[name] = self.cached(name, compute)
         return results
 
-    def extra_data(self, name: str, split: Split) -> tuple[np.ndarray, np.ndarray]:
+    def extra_data(self, name: str, split: Split) -> list[FileRows | ArrayRows]:
         """What a variant adds to the real training rows."""
         real = self.real
         if name == "radar_only":
-            return real.x[:0], real.y[:0]
+            return []
         if name in SYNTH_MODES:
             provider = instantiate(self.cfg.synth.provider)
             path = provider(real.path, split.pool, SYNTH_MODES[name], fit_rows=split.train, seed=self.seed,
                             cache_dir=Path(self.cfg.synth.cache_dir))
-            syn = load_synthetic(path, real.y[split.pool], real.x.shape[1:])
-            return syn.x, syn.y
+            load_synthetic(path, real.y[split.pool], real.x.shape[1:])  # checks the provider's contract
+            return [FileRows(Path(path))]
         if name == "cgan":
-            return self.cgan_samples(split)
+            return [ArrayRows(*self.cgan_samples(split))]
         raise ValueError(f"unknown variant {name!r}")
 
     def cgan_samples(self, split: Split) -> tuple[np.ndarray, np.ndarray]:
@@ -293,19 +304,21 @@ class Job:
             with np.load(f) as z:
                 return z["x"], z["y"]
         cfg, real = self.cfg.cgan, self.real
-        x, y = real.x[split.train], real.y[split.train]
+        y = real.y[split.train]
+        shape = (1, *real.x.shape[1:])
         n_classes = len(real.classes)
         pl.seed_everything(self.seed, verbose=False)
-        gen = instantiate(cfg.generator, num_classes=n_classes, shape=(1, *x.shape[1:]))
-        disc = instantiate(cfg.discriminator, num_classes=n_classes, shape=(1, *x.shape[1:]))
+        gen = instantiate(cfg.generator, num_classes=n_classes, shape=shape)
+        disc = instantiate(cfg.discriminator, num_classes=n_classes, shape=shape)
         module = CGANModule(gen, disc, lr=float(cfg.lr), betas=tuple(cfg.betas), real_label=float(cfg.real_label),
                             mismatch=bool(cfg.get("mismatch", True)))
-        loader = tensor_loader(x, y, batch_size=int(cfg.batch_size), seed=self.seed, drop_last=len(y) > int(cfg.batch_size))
+        data = TrainingRowsDataModule([FileRows(real.path, split.train)], batch_size=int(cfg.batch_size), seed=self.seed,
+                                      drop_last=len(y) > int(cfg.batch_size))
         ckpt_dir = self.state / "cgan_generator" / "checkpoints"
         trainer = make_trainer(self.cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
                                callbacks=self._callbacks(), overrides={"max_steps": int(cfg.max_steps), "max_epochs": -1},
                                checkpoint_interval_s=float(self.cfg.get("checkpoint_interval_s", 0)))
-        resumable_fit(trainer, module, loader, ckpt_dir)
+        resumable_fit(trainer, module, data, ckpt_dir)
         pool_counts = np.bincount(real.y[split.pool], minlength=n_classes)
         per_class = cfg.get("samples_per_class")
         counts = {int(c): int(per_class if per_class is not None else pool_counts[c]) for c in np.unique(y)}
@@ -334,7 +347,7 @@ class Job:
         ext = load_arrays(provider(source_cfg, seed=self.seed, cache_dir=Path(self.cfg.synth.cache_dir)))
         if ext.x.shape[1:] != self.real.x.shape[1:]:
             raise ValueError(f"external spectrograms {ext.x.shape[1:]} differ from the radar data's {self.real.x.shape[1:]}")
-        net = self.fit_classifier("pretrain", ext.x, ext.y, len(ext.classes),
+        net = self.fit_classifier("pretrain", [FileRows(ext.path)], len(ext.classes),
                                   overrides={"max_steps": int(self.cfg.pretrain.max_steps), "max_epochs": -1})
         state = backbone_state(net.cpu())
         if self.rank_zero:
@@ -367,7 +380,7 @@ class Job:
                         nonlocal backbone
                         if init == "pretrained" and backbone is None:
                             backbone = self.pretrained_backbone()
-                        return self.train_and_test(name, real.x[train], ytr, test, len(ids), names, test_y=yte,
+                        return self.train_and_test(name, [FileRows(real.path, train, ytr)], test, len(ids), names, test_y=yte,
                                                    init=backbone if init == "pretrained" else None)
 
                     results[name] = self.cached(name, compute)
