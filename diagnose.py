@@ -15,6 +15,8 @@ from omegaconf import DictConfig
 
 import handradar.config  # noqa: F401  (registers the ${hr_root:} resolver used by the config tree)
 
+USAGE = "python diagnose.py data.root=DIR | data=world | +experiment=gap_benchmark [key=value ...]"
+
 
 @hydra.main(config_path="conf", config_name="diagnose", version_base="1.3")
 def main(cfg: DictConfig) -> None:
@@ -22,7 +24,7 @@ def main(cfg: DictConfig) -> None:
 
     from handradar.cli import run_job
 
-    run_job(get_method(str(cfg.job)), cfg)
+    run_job(get_method(str(cfg.job)), cfg, usage=USAGE)
 
 
 if __name__ == "__main__":

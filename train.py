@@ -11,13 +11,15 @@ from omegaconf import DictConfig
 
 import handradar.config  # noqa: F401  (registers the ${hr_root:} resolver used by the config tree)
 
+USAGE = "python train.py [+experiment=PRESET] [data=recordings data.root=DIR] [key=value ...]"
+
 
 @hydra.main(config_path="conf", config_name="train", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     from handradar.cli import run_job
     from handradar.tasks.train import run
 
-    run_job(run, cfg)
+    run_job(run, cfg, usage=USAGE)
 
 
 if __name__ == "__main__":

@@ -1,23 +1,80 @@
 """Atomic file output: write to a temporary file beside the target, then os.replace.
 
-An interrupted run (exception, Ctrl-C) never leaves a partial file at the target path.
+An interrupted run (exception, Ctrl-C, SIGTERM through :mod:`handradar.runs.cli`) never leaves a
+partial file at the target path. A killed run (SIGKILL, power loss) leaves its temporary file
+``.{name}.{pid}@{host}.{random}.part``; the next write of the same target removes it once its
+process is gone (see :func:`remove_stale_parts`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import glob
 import os
+import re
+import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 
+def _host() -> str:
+    """This machine's name, reduced to characters that are safe in a file name and free of dots."""
+    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname()) or "localhost"
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    except OverflowError:  # not a pid at all
+        return False
+    return True
+
+
+def remove_stale_parts(path: str | Path) -> list[Path]:
+    """Remove the temporary files of ``path`` left by killed runs; return them.
+
+    A temporary file is stale when it was made on this host by a process that no longer exists.
+    Files of live processes (a concurrent run writing the same target, e.g. two jobs of a sweep
+    building one cache) and files from other hosts on a shared disk are left alone.
+    """
+    path = Path(path)
+    pattern = re.compile(re.escape(f".{path.name}.") + r"(\d+)@([A-Za-z0-9_-]+)\.[^.]+\.part")
+    removed = []
+    for name in glob.glob(glob.escape(str(path.parent / f".{path.name}.")) + "*.part"):
+        m = pattern.fullmatch(Path(name).name)
+        if m is None or m.group(2) != _host() or _alive(int(m.group(1))):
+            continue
+        with contextlib.suppress(FileNotFoundError):  # another run removed it first
+            Path(name).unlink()
+            removed.append(Path(name))
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path in the target's folder; move it onto ``path`` on success only."""
+    """Yield a temporary path in the target's folder; move it onto ``path`` on success only.
+
+    OSError names the folder when the folder cannot be made or written (not the temporary file).
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):  # the folder, or one above it, is a file: name that file
+        blocker = next((p for p in (path.parent, *path.parent.parents) if p.exists() and not p.is_dir()), path.parent)
+        raise NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR), str(blocker)) from None
+    remove_stale_parts(path)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}@{_host()}.", suffix=".part", dir=path.parent)
+    except OSError as exc:  # e.g. a read-only folder
+        raise OSError(exc.errno, exc.strerror, str(path.parent)) from None
     os.close(fd)
     tmp_path = Path(tmp)
     try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -141,6 +142,64 @@ def test_truncated_capture_needs_permission(tmp_path):
         load_recording(rec)
     with pytest.warns(UserWarning, match="last frame truncated"):
         assert load_recording(rec, allow_truncated=True).n_frames == 23
+
+
+TEMPLATE_HAND_LENGTH_M = 0.1911  # the writer's hand, wrist to middle fingertip (tests/hand/template.py)
+
+
+def _scaled_matrix(scale: float, translation_m=(0.01, -0.02, 0.05)) -> list[list[float]]:
+    """The writer's leap_to_radar with its 3x3 part times ``scale`` and another translation."""
+    m = np.array(LEAP_TO_RADAR)
+    m[:3, :3] *= scale
+    m[:3, 3] = translation_m
+    return m.tolist()
+
+
+@pytest.mark.parametrize(("scene", "length_mm", "slip"), [
+    # Leap coordinates in metres read as millimetres: the hand comes out 1000 times too small
+    (Scene(leap_scale=1e-3), TEMPLATE_HAND_LENGTH_M, "Leap coordinates are in metres instead of millimetres"),
+    (Scene(leap_scale=0.1), TEMPLATE_HAND_LENGTH_M * 100, "in centimetres instead of millimetres"),
+    # millimetres, but a leap_to_radar that keeps millimetres: 1000 times too large
+    (Scene(extra_meta={"leap_to_radar": _scaled_matrix(1000.0)}), TEMPLATE_HAND_LENGTH_M * 1e6,
+     "leap_to_radar in meta.json keeps millimetres"),
+])
+def test_leap_units_must_give_a_hand_sized_hand(tmp_path, scene, length_mm, slip):
+    rec = write_recording(tmp_path / "r", scene)
+    with pytest.raises(FormatError) as info:
+        load_recording(rec)
+    msg = str(info.value)
+    assert msg.startswith(f"{rec / 'leap.jsonl'}: after leap_to_radar the hands measure ")
+    value, unit = re.search(r"measure ([\d.e+]+) (mm|cm|m) from the wrist", msg).groups()
+    assert float(value) * {"mm": 1.0, "cm": 10.0, "m": 1e3}[unit] == pytest.approx(length_mm, rel=0.01)
+    assert "(median of 260 tracked hand frames); expected 3 cm to 30 cm" in msg and slip in msg
+
+
+def test_hands_must_be_near_the_radar(tmp_path):
+    rec = write_recording(tmp_path / "r", Scene(extra_meta={"leap_to_radar": _scaled_matrix(1.0, (0.01, -0.02, 10.0))}))
+    with pytest.raises(FormatError, match=r"leap.jsonl: after leap_to_radar the hands are 10.\d m from the radar "
+                                          r"\(median of 260 tracked hand frames\); expected within 3 m"):
+        load_recording(rec)
+
+
+def test_plausible_hands_pass_the_geometry_check(tmp_path):
+    # leap_to_radar scaled by 0.3 / 1.45: a 5.7 cm hand near the radar, a 27.7 cm hand about 2.5 m away
+    for scale, z_m in ((0.3, 0.05), (1.45, 1.8)):
+        rec = write_recording(tmp_path / f"s{scale}", Scene(extra_meta={
+            "leap_to_radar": _scaled_matrix(scale, (0.01, -0.02, z_m))}))
+        pos = load_recording(rec).skeleton.positions[0, 0]
+        assert np.linalg.norm(pos - pos[0], axis=-1).max() == pytest.approx(TEMPLATE_HAND_LENGTH_M * scale, rel=1e-3)
+        assert np.linalg.norm(pos.mean(axis=0)) < 3.0
+
+
+def test_continuous_framing_is_a_radar_cfg_error(tmp_path):
+    """numFrames 0 lets adc_data.bin decide the capture length; a longer capture then looked like a
+    Leap file too short. radar.cfg is checked first and named."""
+    rec = write_recording(tmp_path / "r", Scene())
+    (rec / "radar.cfg").write_text((rec / "radar.cfg").read_text().replace("frameCfg 0 0 128 24 ", "frameCfg 0 0 128 0 "))
+    (rec / "adc_data.bin").write_bytes((rec / "adc_data.bin").read_bytes() * 2)  # 48 frames, Leap covers 24
+    with pytest.raises(FormatError, match=r"r/radar.cfg: frameCfg numFrames is 0 \(continuous framing\); a recording's "
+                                          r"radar.cfg must give the number of frames captured \(expected >= 1\)"):
+        load_recording(rec)
 
 
 _VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**25, 10**25), st.just(10**400),

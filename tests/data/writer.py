@@ -78,6 +78,7 @@ class Scene:
     radar_start_us: int = 2_000_000
     leap_rate_hz: float = 100.0
     leap_span_s: tuple[float, float] = (-0.1, 2.5)
+    leap_scale: float = 1.0  # multiplies the Leap coordinates written (0.001: metres instead of millimetres)
     extra_meta: dict = field(default_factory=dict)
 
     def centre(self, t: np.ndarray) -> np.ndarray:
@@ -92,9 +93,9 @@ class Scene:
         return tpl[None] + self.centre(t)[:, None, :]
 
 
-def leap_frame(i: int, ts_us: int, joints_radar: np.ndarray) -> dict:
+def leap_frame(i: int, ts_us: int, joints_radar: np.ndarray, scale: float = 1.0) -> dict:
     m = np.array(LEAP_TO_RADAR)
-    mm = (joints_radar - m[:3, 3]) @ np.linalg.inv(m[:3, :3]).T
+    mm = scale * ((joints_radar - m[:3, 3]) @ np.linalg.inv(m[:3, :3]).T)
     r = lambda v: [round(float(x), 4) for x in v]  # noqa: E731
     hand = {"id": 3, "type": "right", "palmPosition": r(mm[[0, 5, 9, 13, 17]].mean(0)), "palmNormal": [0, -1, 0],
             "direction": [0, 0, -1], "palmWidth": 80.0, "wrist": r(mm[0]), "elbow": r(mm[0] + [0, -50, 200])}
@@ -116,7 +117,7 @@ def write_recording(folder: Path, scene: Scene) -> Path:
     joints = scene.joints(t)
     with (folder / "leap.jsonl").open("w") as fh:
         for i, (ti, j) in enumerate(zip(t, joints)):
-            fh.write(json.dumps(leap_frame(i, int(round(scene.radar_start_us + ti * 1e6)), j)) + "\n")
+            fh.write(json.dumps(leap_frame(i, int(round(scene.radar_start_us + ti * 1e6)), j, scene.leap_scale)) + "\n")
     meta = {"format": "handradar.recording/1", "gesture": scene.gesture, "subject": scene.subject,
             "angle_deg": scene.angle_deg, "hands": 1, "occlusion": scene.occlusion, "repetition": scene.repetition,
             "radar_start_us": scene.radar_start_us, "leap_to_radar": LEAP_TO_RADAR, **scene.extra_meta}

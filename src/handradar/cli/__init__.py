@@ -2,30 +2,25 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
 from omegaconf import DictConfig
 
 
-def run_job(job: Callable[[DictConfig], Path], cfg: DictConfig) -> None:
+def run_job(job: Callable[[DictConfig], Path], cfg: DictConfig, *, usage: str | None = None) -> None:
     """Run ``job(cfg)`` and print the path it returns as the last line.
 
-    A handradar error (bad input, named file and problem) ends a single run with a one-line message
-    and exit status 1; in a multirun it propagates, so that Hydra's job report records it and the
-    other jobs go on.
+    Errors go through :func:`handradar.runs.cli.run_cli`: a handradar error (bad input, named file
+    and problem) or an OS error ends a single run with a one-line message and exit status 1, a
+    missing mandatory config value with ``usage`` and exit status 2, Ctrl-C / SIGTERM with exit
+    status 130 / 143. In a multirun every failure propagates, so that Hydra's job report records it
+    and the other jobs go on.
     """
-    from hydra.core.hydra_config import HydraConfig
-    from hydra.types import RunMode
+    import sys
 
-    from handradar.errors import HandradarError
+    from handradar.runs.cli import run_cli
 
-    try:
-        path = job(cfg)
-    except HandradarError as exc:
-        if HydraConfig.get().mode == RunMode.MULTIRUN:
-            raise
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(1)
+    path = run_cli(lambda: job(cfg), cfg, usage=usage or f"{Path(sys.argv[0]).name} key=value ...",
+                   reraise_in_multirun=True)
     print(path, flush=True)

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import hydra
 from omegaconf import DictConfig
 
 from handradar.config import VERSION_BASE, config_dir
-from handradar.errors import HandradarError
+from handradar.runs.cli import run_cli
+
+USAGE = "handradar-world out=DIR [limit=N] [overwrite=true] [world.*=value ...]"
 
 
 @hydra.main(config_path=str(config_dir()), config_name="world", version_base=VERSION_BASE)
@@ -18,13 +19,13 @@ def main(cfg: DictConfig) -> None:
 
     from handradar.world import write_world_recordings
 
-    out = Path(cfg.out).resolve()
-    try:
-        folders = write_world_recordings(cfg.world, instantiate(cfg.radar), out, limit=cfg.limit,
-                                         overwrite=cfg.overwrite)
-    except (HandradarError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        sys.exit(1)
+    def job():
+        out = Path(cfg.out).resolve()
+        return write_world_recordings(cfg.world, instantiate(cfg.radar), out, limit=cfg.limit,
+                                      overwrite=cfg.overwrite), out
+
+    # each recording appears complete or not at all, and a re-run keeps the finished ones
+    folders, out = run_cli(job, cfg, usage=USAGE, target="out", resumable=True, errors=(ValueError,))
     print(f"{len(folders)} recordings in {out}")
     print(out)
 

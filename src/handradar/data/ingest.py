@@ -5,17 +5,25 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from tqdm.auto import tqdm
 
 from handradar.data.examples import recording_example, skeleton_steps
 from handradar.data.hdf5 import open_writer
-from handradar.data.recording import find_recordings, load_recording
+from handradar.data.recording import (
+    FILES,
+    check_folder,
+    find_meta_less_folders,
+    find_recordings,
+    load_recording,
+    read_radar,
+)
 from handradar.errors import FormatError, HandradarError
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
+from handradar.radar.config import RadarConfig
 from handradar.vocab import GESTURES
 
 log = logging.getLogger(__name__)
@@ -46,21 +54,72 @@ class IngestSummary:
         return "\n".join(lines)
 
 
+# RadarConfig fields that leave the processing chain's output unchanged: the capture length (the
+# window is chosen inside each capture), the transmitter's turn-on time before the ramp, and a
+# constant amplitude scale (RX gain, ADC bits) that the chain's per-spectrogram peak normalisation
+# removes. Every other field changes the range bins, Doppler axis, channels or timing.
+NOT_PROCESSING_FIELDS = frozenset({"n_frames", "tx_start_time_s", "rx_gain_db", "adc_bits", "source"})
+
+
+def processing_fields(radar: RadarConfig) -> dict[str, object]:
+    """The radar settings that change the processing chain (name -> value)."""
+    return {f.name: getattr(radar, f.name) for f in fields(radar) if f.name not in NOT_PROCESSING_FIELDS}
+
+
+def reference_recording(radars: dict[Path, RadarConfig]) -> Path | None:
+    """The recording whose processing settings are the most common; ties: the first in sorted order.
+
+    ``radars``: each readable recording's radar.cfg. The reference is the first recording (sorted
+    by path) of the most common configuration, so one odd recording never decides, wherever it sorts.
+    """
+    if not radars:
+        return None
+    keys = {folder: tuple(processing_fields(r).items()) for folder, r in radars.items()}
+    counts = Counter(keys.values())
+    most = max(counts.values())
+    return next(folder for folder in sorted(radars) if counts[keys[folder]] == most)
+
+
+def _values(a: object, b: object) -> tuple[str, str]:
+    """Two differing settings as text that tells them apart (10 significant digits, else in full)."""
+    if isinstance(a, float) and isinstance(b, float):
+        short = f"{a:.10g}", f"{b:.10g}"
+        return short if short[0] != short[1] else (repr(a), repr(b))
+    return str(a), str(b)
+
+
+def radar_differences(radar: RadarConfig, reference: RadarConfig, reference_name: str) -> list[str]:
+    """``field: value here, value in <reference>`` for each processing setting in which ``radar`` differs."""
+    mine, ref = processing_fields(radar), processing_fields(reference)
+    out = []
+    for k in mine:
+        if mine[k] != ref[k]:
+            here, there = _values(mine[k], ref[k])
+            out.append(f"{k}: {here} here, {there} in {reference_name}")
+    return out
+
+
 def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_rate_hz: float = 100.0,
            strict: bool = False, allow_truncated: bool = False, coverage_tolerance_s: float = 0.05,
            progress: bool = True) -> IngestSummary:
     """Write every valid recording under ``root`` to ``out``; the file appears only when complete.
 
-    strict: raise at the first bad recording (nothing is written). Otherwise bad recordings are
-    skipped and listed in the summary. All recordings must share one radar configuration.
+    strict: raise at the first bad recording (nothing is written; missing files and radar.cfg are
+    checked in every recording before anything else). Otherwise bad recordings are skipped and
+    listed in the summary. Folders with recording files but no meta.json count as
+    found and are skipped. All recordings must share the settings that change the processing
+    chain (:func:`processing_fields`): every radar.cfg is read first, the most common settings are
+    the reference (ties: the first recording in sorted order), and a recording that differs is
+    skipped with the fields and both values.
     """
     out = Path(out)
     if out.is_dir():
         raise FormatError(out, "the output path is a directory; expected a file name such as data.h5")
-    folders = find_recordings(root)
+    meta_less = set(find_meta_less_folders(root))
+    folders = sorted([*find_recordings(root), *meta_less])
     summary = IngestSummary(found=len(folders))
     if not folders:
-        raise FormatError(root, "no recordings found (no folder with a meta.json)")
+        raise FormatError(root, "no recordings found (no folder with a meta.json or other recording files)")
     root = Path(root)
 
     def name_of(folder: Path) -> str:
@@ -68,27 +127,52 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
         rel = folder.relative_to(root).as_posix()
         return rel if rel != "." else folder.name
 
+    def skip(folder: Path, exc: HandradarError) -> None:
+        if strict:
+            raise exc
+        summary.skip(name_of(folder), exc)
+        log.warning("skipping %s: %s", folder, exc)
+
+    # the radar configurations first: they choose the reference, and a bad radar.cfg is reported as such
+    radars: dict[Path, RadarConfig] = {}
+    for folder in folders:
+        try:
+            if folder in meta_less:
+                present = [f for f in FILES if (folder / f).is_file()]
+                raise FormatError(folder / "meta.json", f"no such file; the folder holds {', '.join(present)} but "
+                                                        "no meta.json (labels, radar_start_us, leap_to_radar), so "
+                                                        "it is not a recording")
+            radars[folder] = read_radar(check_folder(folder))
+        except HandradarError as exc:
+            skip(folder, exc)
+    ref = reference_recording(radars)
+    if ref is not None:
+        n_ref = sum(processing_fields(r) == processing_fields(radars[ref]) for r in radars.values())
+        log.info("reference radar configuration: %s (%d of %d recordings)", name_of(ref), n_ref, len(radars))
+
     with contextlib.ExitStack() as stack:
-        writer = radar = None
-        for folder in tqdm(folders, desc="ingest", unit="rec", disable=not progress):
+        writer = None
+        for folder in tqdm(list(radars), desc="ingest", unit="rec", disable=not progress):
             try:
+                diff = radar_differences(radars[folder], radars[ref], name_of(ref))
+                if diff:
+                    raise FormatError(folder / "radar.cfg", f"radar configuration differs from the reference "
+                                                            f"recording {name_of(ref)}'s in {'; '.join(diff)} "
+                                                            f"(the reference has the most common configuration, "
+                                                            f"{n_ref} of {len(radars)} recordings; ties go to the "
+                                                            "first in sorted order); ingest one configuration per "
+                                                            "dataset")
                 rec = load_recording(folder, coverage_tolerance_s=coverage_tolerance_s,
                                      allow_truncated=allow_truncated)
-                if radar is not None and rec.radar != radar:
-                    raise FormatError(folder / "radar.cfg", "radar configuration differs from the first "
-                                                            "recording's; ingest one configuration per dataset")
                 try:
                     ex = recording_example(rec, chain, skeleton_rate_hz)
                 except ValueError as exc:  # a capture shorter than one spectrogram window, a gate beyond range
                     raise FormatError(folder / "adc_data.bin", str(exc)) from None
             except HandradarError as exc:
-                if strict:
-                    raise
-                summary.skip(name_of(folder), exc)
-                log.warning("skipping %s: %s", folder, exc)
+                skip(folder, exc)
                 continue
             if writer is None:
-                radar = rec.radar
+                radar = radars[ref]
                 n_steps = skeleton_steps(chain, radar, skeleton_rate_hz)
                 writer = stack.enter_context(open_writer(
                     out, classes=GESTURES, radar=radar, chain=chain, skeleton_rate_hz=skeleton_rate_hz,

@@ -16,7 +16,12 @@ import numpy as np
 
 from handradar.atomic import atomic_write_text
 from handradar.errors import FormatError
-from handradar.hand.leap import finite_number, leap_matrix, read_leap_jsonl
+from handradar.hand.leap import (
+    check_hand_geometry,
+    finite_number,
+    leap_matrix,
+    read_leap_jsonl,
+)
 from handradar.hand.skeleton import HandSequence
 from handradar.radar.config import RadarConfig
 from handradar.radar.dca1000 import read_adc
@@ -161,6 +166,20 @@ def check_folder(folder: str | Path) -> Path:
     return folder
 
 
+def read_radar(folder: str | Path) -> RadarConfig:
+    """A recording's radar.cfg; a recording must state its capture length (numFrames >= 1).
+
+    numFrames 0 (continuous framing) would let adc_data.bin decide the number of frames, so a
+    wrong frame layout or a longer capture could not be told from a Leap file that is too short.
+    """
+    path = Path(folder) / "radar.cfg"
+    radar = RadarConfig.from_file(path)
+    if radar.n_frames == 0:
+        raise FormatError(path, "frameCfg numFrames is 0 (continuous framing); a recording's radar.cfg must give "
+                                "the number of frames captured (expected >= 1), which adc_data.bin is checked against")
+    return radar
+
+
 def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
                    allow_truncated: bool = False) -> Recording:
     """Load and validate one recording folder.
@@ -170,10 +189,11 @@ def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
     meta.json announces must be tracked somewhere in the capture.
     """
     folder = check_folder(folder)
+    radar = read_radar(folder)  # first: the Leap coverage check below measures against its capture length
     meta = read_meta(folder)
-    radar = RadarConfig.from_file(folder / "radar.cfg")
     # the small files first: a bad leap.jsonl is found before megabytes of ADC are read
     skeleton = read_leap_jsonl(folder / "leap.jsonl", np.asarray(meta.leap_to_radar), meta.radar_start_us)
+    check_hand_geometry(skeleton, folder / "leap.jsonl")
     adc = read_adc(folder / "adc_data.bin", radar, allow_truncated=allow_truncated)
     end = adc.shape[0] * radar.frame_period_s
     t0, t1 = float(skeleton.times[0]), float(skeleton.times[-1])
@@ -196,6 +216,18 @@ def find_recordings(root: str | Path) -> list[Path]:
     if not root.is_dir():
         raise FormatError(root, "no such directory")
     return sorted(p.parent for p in root.rglob("meta.json"))
+
+
+def find_meta_less_folders(root: str | Path) -> list[Path]:
+    """Folders under ``root`` holding recording files (radar.cfg, adc_data.bin, leap.jsonl) but no meta.json, sorted.
+
+    :func:`find_recordings` does not see them; ingest reports them as skipped.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise FormatError(root, "no such directory")
+    holders = {p.parent for name in FILES if name != "meta.json" for p in root.rglob(name) if p.is_file()}
+    return sorted(f for f in holders if not (f / "meta.json").exists())
 
 
 def write_meta(folder: str | Path, meta: RecordingMeta, truth: dict | None = None) -> None:

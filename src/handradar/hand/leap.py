@@ -201,6 +201,59 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
     return HandSequence(radar.astype(np.float32), times, mask, source=str(path))
 
 
+# A tracked hand from the wrist to its farthest joint: 17-21 cm for an adult's open hand (wrist to
+# middle fingertip), about 9 cm in a fist. The bounds leave room for small hands and tracking error
+# and still catch a unit slip (a factor of 10 or more).
+HAND_LENGTH_RANGE_M = (0.03, 0.30)
+TYPICAL_HAND_LENGTH_M = 0.18
+# Leap tracks hands within about 0.6 m of its sensor, which sits beside the radar
+MAX_HAND_DISTANCE_M = 3.0
+
+
+def _length(m: float) -> str:
+    """A length in metres, written in the unit that reads best."""
+    return f"{m * 1e3:.3g} mm" if m < 0.01 else f"{m * 1e2:.3g} cm" if m < 1 else f"{m:.3g} m"
+
+
+def _unit_hint(factor: float) -> str:
+    """The likely unit slip behind hands ``factor`` times their typical size (within a factor of 5)."""
+    slips = {
+        -3: "likely the Leap coordinates are in metres instead of millimetres",
+        -1: "likely the Leap coordinates are in centimetres instead of millimetres",
+        3: "likely leap_to_radar in meta.json keeps millimetres instead of converting them to metres "
+           "(expected a scale of 0.001)",
+    }
+    decades = math.log10(factor) if factor > 0 else -math.inf
+    for exponent, hint in slips.items():
+        if abs(decades - exponent) <= math.log10(5):
+            return hint
+    return "check the units of the Leap coordinates (millimetres) and of leap_to_radar (millimetres to metres)"
+
+
+def check_hand_geometry(seq: HandSequence, source: str | Path) -> None:
+    """Fail unless the tracked hands of a radar-frame ``seq`` are hand-sized and near the radar.
+
+    Hand length (wrist to the farthest joint) and distance (joint centroid to the radar) are the
+    medians over all tracked hand frames, so a few glitched frames do not decide; a unit slip in
+    leap.jsonl or in leap_to_radar scales every frame and is caught.
+    """
+    pos = seq.positions[seq.mask].astype(np.float64)  # (tracked hand frames, 21, 3) metres
+    if not len(pos):
+        return  # untracked throughout: the recording's tracked-hands check reports it
+    length = float(np.median(np.linalg.norm(pos - pos[:, :1], axis=-1).max(axis=-1)))
+    lo, hi = HAND_LENGTH_RANGE_M
+    if not lo <= length <= hi:
+        raise FormatError(source, f"after leap_to_radar the hands measure {_length(length)} from the wrist to the "
+                                  f"farthest joint (median of {len(pos)} tracked hand frames); expected "
+                                  f"{_length(lo)} to {_length(hi)}: "
+                                  f"{_unit_hint(length / TYPICAL_HAND_LENGTH_M)}")
+    distance = float(np.median(np.linalg.norm(pos.mean(axis=1), axis=-1)))
+    if distance > MAX_HAND_DISTANCE_M:
+        raise FormatError(source, f"after leap_to_radar the hands are {_length(distance)} from the radar (median of "
+                                  f"{len(pos)} tracked hand frames); expected within {_length(MAX_HAND_DISTANCE_M)}: "
+                                  "check the translation column of leap_to_radar in meta.json (metres)")
+
+
 def leap_frames_from_sequence(seq: HandSequence, radar_to_leap: np.ndarray, radar_start_us: float,
                               *, finger_width_mm: float = 18.0) -> Iterable[dict]:
     """Leap frames (dicts) for a radar-frame sequence: the inverse of :func:`read_leap_jsonl`."""
