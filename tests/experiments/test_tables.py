@@ -51,7 +51,7 @@ def test_build_tables_layout():
     assert rows[0][:4] == ["row", "Radar only mean", "Radar only std", "Radar only n"]
     assert rows[1][:4] == ["5 %", "0.4500", "0.0707", "2"]
     # one job's table (what train.py prints)
-    assert job_table(_few(0.5), {"test/acc_radar_only": 0.9}).endswith("| 50 % | 0.900 | – | – | – |")
+    assert job_table(_few(0.5), {"test/acc_radar_only": 0.9}).endswith("| 50 % | 0.900 | – | – | – | – | – | – |")
 
 
 def _log_run(tracker_uri: str, preset: str, params: dict, metrics: dict, job_hash: str, status: str = "FINISHED",

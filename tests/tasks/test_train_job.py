@@ -13,7 +13,8 @@ from handradar.tasks.train import run
 from tests.tasks import fakes
 from tests.tasks.fakes import compose_train, fake_overrides
 
-VARIANT_METRICS = {"test/acc_radar_only", "test/acc_model_synth", "test/acc_enhanced_synth", "test/acc_cgan"}
+FOUR = ["radar_only", "model_synth", "enhanced_synth", "cgan"]
+VARIANT_METRICS = {f"test/acc_{v}" for v in (*FOUR, "synth_only", "model_synth_only", "radar_pool")}
 
 
 def _state(run_dir: Path, tmp: Path, preset: str) -> Path:
@@ -23,11 +24,11 @@ def _state(run_dir: Path, tmp: Path, preset: str) -> Path:
 
 def test_few_shot_job_end_to_end(fake_data: Path, tmp_path: Path):
     fakes.CALLS.clear()
-    cfg = compose_train(["+experiment=few_shot_50pct", *fake_overrides(fake_data, tmp_path),
-                         "trainer.max_steps=30", "data.batch_size=16"])
+    cfg = compose_train(["+experiment=few_shot_50pct", "split.test=remainder", f"variants=[{','.join(FOUR)}]",
+                         *fake_overrides(fake_data, tmp_path), "trainer.max_steps=30", "data.batch_size=16"])
     run_dir = run(cfg, run_dir=tmp_path / "run")
     metrics = json.loads((run_dir / "metrics.json").read_text())
-    assert set(metrics) == VARIANT_METRICS
+    assert set(metrics) == {f"test/acc_{v}" for v in FOUR}
     assert all(0.0 <= v <= 1.0 for v in metrics.values())
     # learning: 4 real rows per class of well separated patterns
     assert metrics["test/acc_radar_only"] >= 0.8
@@ -51,12 +52,31 @@ def test_few_shot_job_end_to_end(fake_data: Path, tmp_path: Path):
 
 def test_fixed_protocol_synthesises_every_non_test_skeleton(fake_data: Path, tmp_path: Path):
     fakes.CALLS.clear()
-    cfg = compose_train(["+experiment=few_shot_20pct", "split.test=fixed", "split.test_fraction=0.25",
+    cfg = compose_train(["+experiment=few_shot_20pct", "split.test_fraction=0.25",  # fixed: the default
                          "variants=[radar_only,model_synth]", "trainer.fast_dev_run=true",
                          *fake_overrides(fake_data, tmp_path)])
     run(cfg, run_dir=tmp_path / "run")
     (call,) = fakes.CALLS
     assert len(call["rows"]) == 60 and len(call["fit_rows"]) == 20  # pool 80 - 20 test; 20 % of 8 per class
+
+
+def test_transfer_variants_train_on_synthetic_alone_and_on_the_pool(fake_data: Path, tmp_path: Path):
+    """Train on synthetic, test on real: the classifier sees no real row, and it learns (the fake provider's
+    spectrograms are the real rows' class patterns); radar_pool trains on the pool's real rows."""
+    fakes.CALLS.clear()
+    cfg = compose_train(["+experiment=few_shot_20pct", "variants=[synth_only,model_synth_only,radar_pool]",
+                         *fake_overrides(fake_data, tmp_path), "trainer.max_steps=30", "data.batch_size=16"])
+    run_dir = run(cfg, run_dir=tmp_path / "run")
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert set(metrics) == {"test/acc_synth_only", "test/acc_model_synth_only", "test/acc_radar_pool"}
+    assert min(metrics.values()) >= 0.8
+    state = _state(run_dir, tmp_path, "few_shot_20pct")
+    split = np.load(state / "split.npz")
+    result = {v: json.loads((state / v / "result.json").read_text()) for v in ("synth_only", "model_synth_only", "radar_pool")}
+    assert result["synth_only"]["n_real"] == 0 and result["synth_only"]["n_extra"] == len(split["pool"])
+    assert result["radar_pool"]["n_real"] == len(split["pool"]) and result["radar_pool"]["n_extra"] == 0
+    assert sorted(c["mode"] for c in fakes.CALLS) == ["enhanced", "model"]
+    assert all(np.array_equal(c["fit_rows"], split["train"]) for c in fakes.CALLS)  # fitted on the training rows only
 
 
 def test_ood_hands_job(fake_data: Path, tmp_path: Path):
@@ -77,7 +97,8 @@ def test_resume_after_crash_matches_uninterrupted_run(fake_data: Path, tmp_path:
     uninterrupted run (80 rows in batches of 16: 5 steps per epoch, 24 steps in all)."""
 
     def overrides(root: Path, marker: Path) -> list[str]:
-        return ["+experiment=few_shot_50pct", "variants=[radar_only,model_synth]", "trainer.max_steps=24",
+        return ["+experiment=few_shot_50pct", "split.test=remainder", "variants=[radar_only,model_synth]",
+                "trainer.max_steps=24",
                 "data.batch_size=16", *fake_overrides(fake_data, root, logger="mlflow"),
                 "+callbacks.crash._target_=tests.tasks.fakes.CrashOnce", "+callbacks.crash.epoch=3",
                 f"+callbacks.crash.marker={marker}", "+callbacks.crash.prefix=model_synth/",

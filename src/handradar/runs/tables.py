@@ -4,10 +4,11 @@
   shifts), columns SSIM and MSE of the modelling-only and the RadarWeightNet-enhanced simulator.
 - Table II (few-shot): one row per real-data fraction and test protocol (``*``: the fixed test split
   of the complete dataset), one column per variant (radar only, + model-based synthetic,
-  + RadarWeightNet-enhanced synthetic, + CGAN).
+  + RadarWeightNet-enhanced synthetic, + CGAN; synthetic only, enhanced and model-based: train on
+  synthetic, test on real; the pool's real rows, their upper reference).
 - Table III (pre-training): one row per (classes, fraction), columns trained from scratch and
   pre-trained on synthetic spectrograms of an external skeleton dataset.
-- Table IV (out of distribution): one row per OOD split, the four variant columns.
+- Table IV (out of distribution): one row per OOD split, the variant columns.
 
 Cells are ``mean ± std`` of the accuracy over the records of a row (seeds), with the count.
 A record is ``{"params": flat config (dotted keys -> str), "metrics": {name: float}}``.
@@ -27,6 +28,9 @@ VARIANT_COLUMNS = (
     ("model_synth", "+ model-based synthetic"),
     ("enhanced_synth", "+ RadarWeightNet synthetic"),
     ("cgan", "+ CGAN"),
+    ("synth_only", "synthetic only (RadarWeightNet)"),
+    ("model_synth_only", "synthetic only (model-based)"),
+    ("radar_pool", "radar, whole pool"),
 )
 OOD_LABELS = {
     "angle": "angle (0° → ±30°)",

@@ -8,11 +8,13 @@ A job (one composed config, one seed) trains several classifiers ("variants") an
   version, data hash, job hash, run dir), per-epoch training metrics ``<variant>/train/*``, the
   final metrics and the figures.
 
-Job kinds (``job``): ``variants`` trains one classifier per entry of ``variants``:
+Job kinds (``job``): ``variants`` trains one classifier per entry of ``variants`` (``VARIANTS``):
 ``radar_only`` (the real training rows of the split), ``model_synth`` / ``enhanced_synth`` (the
-same + one synthetic spectrogram per training-pool row from ``synth.provider`` in mode
-``model`` / ``enhanced``), ``cgan`` (the same + CGAN samples, as many per class as the pool has
-rows). ``external_pretrain`` pre-trains on ``synth.external_provider`` data and fine-tunes on
+same + one synthetic spectrogram per pool row, i.e. every non-test skeleton, from ``synth.provider``
+in mode ``model`` / ``enhanced``), ``cgan`` (the same + CGAN samples, as many per class as the pool
+has rows); the transfer variants ``model_synth_only`` / ``synth_only`` train on those synthetic
+spectrograms alone (train on synthetic, test on real) and ``radar_pool`` on the pool's real
+spectrograms (their upper reference). ``external_pretrain`` pre-trains on ``synth.external_provider`` data and fine-tunes on
 few-shot fractions of class subsets, against the same training from scratch. Any other job kind is
 a dotted function name ``fn(job: Job) -> {metric name: number}`` (e.g. a synthesis-fit job): it gets
 the loaded real data (``job.real``), the state folder (``job.state``, for resumable work), the
@@ -66,8 +68,17 @@ from handradar.viz.confusion import plot_confusion
 
 log = logging.getLogger(__name__)
 
-VARIANTS = ("radar_only", "model_synth", "enhanced_synth", "cgan")
-SYNTH_MODES = {"model_synth": "model", "enhanced_synth": "enhanced"}
+# variant -> (the split's real radar rows it trains on: "train", "pool" or None; what it adds:
+# synthetic spectrograms of the pool's skeletons in provider mode "model" / "enhanced", CGAN samples, or nothing)
+VARIANTS: dict[str, tuple[str | None, str | None]] = {
+    "radar_only": ("train", None),
+    "model_synth": ("train", "model"),
+    "enhanced_synth": ("train", "enhanced"),
+    "cgan": ("train", "cgan"),
+    "model_synth_only": (None, "model"),   # train on synthetic, test on real: does synthetic stand in for real?
+    "synth_only": (None, "enhanced"),
+    "radar_pool": ("pool", None),          # the upper reference of the *_only variants: the pool's real rows
+}
 HASH_IGNORED = ("paths", "logger", "resume", "state_dir", "threads", "checkpoint_interval_s", "print_table")
 
 
@@ -270,31 +281,34 @@ class Job:
         results = {}
         for name in self.cfg.variants:
             if name not in VARIANTS:
-                raise ValueError(f"unknown variant {name!r}; choose from {VARIANTS}")
+                raise ValueError(f"unknown variant {name!r}; choose from {list(VARIANTS)}")
 
             def compute(name: str = name) -> dict:
-                extra = self.extra_data(name, split)
-                parts = [FileRows(real.path, split.train), *extra]
+                rows, adds = VARIANTS[name]
+                real_rows = {"train": split.train, "pool": split.pool, None: split.train[:0]}[rows]
+                extra = self.extra_data(adds, split)
+                parts = [FileRows(real.path, real_rows), *extra] if len(real_rows) else extra
                 return {**self.train_and_test(name, parts, split.test, n_classes, real.classes),
-                        "n_real": int(len(split.train)), "n_extra": sum(_rows(p) for p in extra)}
+                        "n_real": int(len(real_rows)), "n_extra": sum(_rows(p) for p in extra)}
 
             results[name] = self.cached(name, compute)
         return results
 
-    def extra_data(self, name: str, split: Split) -> list[FileRows | ArrayRows]:
-        """What a variant adds to the real training rows."""
+    def extra_data(self, adds: str | None, split: Split) -> list[FileRows | ArrayRows]:
+        """What a variant adds to its real rows (``VARIANTS``): synthetic rows of the pool's skeletons
+        (the provider fits what it needs on the real training rows only), CGAN samples, or nothing."""
         real = self.real
-        if name == "radar_only":
+        if adds is None:
             return []
-        if name in SYNTH_MODES:
+        if adds in ("model", "enhanced"):
             provider = instantiate(self.cfg.synth.provider)
-            path = provider(real.path, split.pool, SYNTH_MODES[name], fit_rows=split.train, seed=self.seed,
+            path = provider(real.path, split.pool, adds, fit_rows=split.train, seed=self.seed,
                             cache_dir=Path(self.cfg.synth.cache_dir))
             load_synthetic(path, real.y[split.pool], real.x.shape[1:])  # checks the provider's contract
             return [FileRows(Path(path))]
-        if name == "cgan":
+        if adds == "cgan":
             return [ArrayRows(*self.cgan_samples(split))]
-        raise ValueError(f"unknown variant {name!r}")
+        raise ValueError(f"unknown addition {adds!r}")
 
     def cgan_samples(self, split: Split) -> tuple[np.ndarray, np.ndarray]:
         """CGAN trained on the real training rows; samples per class as many as the pool's rows
