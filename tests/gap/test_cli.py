@@ -16,9 +16,11 @@ from omegaconf import OmegaConf
 
 from handradar.config import VERSION_BASE, config_dir
 from handradar.data.datasets import ReferenceWorld
-from handradar.gap.report import validate_report
+from handradar.errors import FormatError
+from handradar.gap.report import fitted_simulator, validate_report
 from handradar.sim.factory import SimFactory
 from tests.data.writer import Scene, write_recording
+from tests.tasks.fakes import compose_train
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -77,3 +79,27 @@ def test_diagnose_command_on_recordings(tmp_path):
         tags = dict(con.execute("select key, value from tags"))
     assert "gap/baseline_ssim" in names and "gap/closed_palm" in names
     assert tags["handradar.cause"] == rep["cause"]
+
+
+def test_fitted_simulator_round_trips_through_train_composition(tmp_path: Path, radar, chain):
+    """diagnose.py writes the fitted simulator (calibrated RCS exponent, kept effects with their fitted
+    values); train.py composes it with sim=fitted sim.from_report=PATH and builds exactly that simulator."""
+    report = {"baseline": {"effects": {"noise": {"snr_db": 12.0}}, "calibration": {"rcs_exponent": 0.25}},
+              "after": {"effects": ["sync_offset", "tracking_jitter"],
+                        "params": {"sync_offset": {"offset_s": 0.03}, "tracking_jitter": {"sigma_s": 0.02}}}}
+    diag_cfg = _compose(["data.root=/nowhere", "sim.effects=[noise]", "+sim.effect_params.noise.snr_db=12"])
+    path = tmp_path / "fitted_sim.yaml"
+    path.write_text(OmegaConf.to_yaml(fitted_simulator(report, OmegaConf.to_container(diag_cfg.sim, resolve=True))))
+    cfg = compose_train(["+experiment=few_shot_5pct", "sim=fitted", f"sim.from_report={path}"])
+    sim = SimFactory.from_config(cfg.sim, radar, chain)()
+    assert [e.name for e in sim.effects] == ["tracking_jitter", "sync_offset", "noise"]  # pipeline order
+    assert sim.rcs_exponent == 0.25 and sim.effect("noise").values() == {"snr_db": 12.0}
+    assert sim.effect("sync_offset").values() == pytest.approx({"offset_s": 0.03})
+    assert sim.effect("tracking_jitter").values() == pytest.approx({"sigma_s": 0.02})
+    assert sim.hand.sections == SimFactory.from_config(diag_cfg.sim, radar, chain)().hand.sections
+    bad = _compose(["data.root=/nowhere", "sim=fitted", f"sim.from_report={tmp_path}/missing.yaml"])
+    with pytest.raises(FormatError, match="fitted simulator not found"):
+        SimFactory.from_config(bad.sim, radar, chain)
+    path.write_text("effects: [noise]\nrcs_exponnet: 0.5\n")
+    with pytest.raises(FormatError, match="unknown simulator setting"):
+        SimFactory.from_config(cfg.sim, radar, chain)

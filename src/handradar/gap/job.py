@@ -17,6 +17,7 @@ Public API:
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 
 from hydra.utils import instantiate
@@ -27,7 +28,7 @@ from handradar.data.datasets import file_hash
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import Diagnosis, diagnose
 from handradar.gap.markdown import render
-from handradar.gap.report import write_report
+from handradar.gap.report import fitted_simulator, write_report
 from handradar.provenance import code_version
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
@@ -40,13 +41,17 @@ log = logging.getLogger(__name__)
 
 
 def write_outputs(diagnosis: Diagnosis, out_dir: str | Path, radar: RadarConfig, chain: ChainConfig,
-                  source: str = "") -> dict[str, Path]:
-    """gap_report.json (validated), figures/*.png and gap_report.md in ``out_dir``."""
+                  source: str = "", sim_settings: Mapping | None = None) -> dict[str, Path]:
+    """gap_report.json (validated), fitted_sim.yaml (the fitted simulator's ``sim`` settings, from the
+    baseline's ``sim_settings``), figures/*.png and gap_report.md in ``out_dir``."""
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": write_report(out / "gap_report.json", diagnosis.report, n_doppler=chain.stft_len,
                                   n_columns=chain.n_columns)}
+    # the fitted simulator, for train.py / handradar-synth: sim=fitted sim.from_report=<this file>
+    paths["sim"] = out / "fitted_sim.yaml"
+    atomic_write_text(paths["sim"], OmegaConf.to_yaml(fitted_simulator(diagnosis.report, sim_settings)))
     figs = diagnosis_figures(diagnosis, radar, chain, out / "figures")
     md = out / "gap_report.md"
     atomic_write_text(md, render(diagnosis.report, figs, out, source) + "\n")
@@ -87,7 +92,7 @@ def run(cfg: DictConfig) -> Path:
                      config=OmegaConf.to_container(cfg, resolve=True), dataset=ref):
         diag = diagnose(data, build, build.effects, OmegaConf.to_container(cfg.diagnose, resolve=True),
                         cache_dir=Path(cfg.paths.cache_dir) / "gap", progress=bool(cfg.get("progress", True)))
-        paths = write_outputs(diag, out, radar, chain, str(path))
+        paths = write_outputs(diag, out, radar, chain, str(path), OmegaConf.to_container(cfg.sim, resolve=True))
         tracker.log_metrics(headline_metrics(diag.report))
         tracker.set_tags({f"{TAG_PREFIX}cause": diag.report["cause"]})
         for name, p in paths.items():

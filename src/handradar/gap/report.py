@@ -1,9 +1,11 @@
-"""The gap report ``handradar.gap_report/1`` (docs/architecture.md, "Gap report"): structure and validation."""
+"""The gap report ``handradar.gap_report/1`` (docs/architecture.md, "Gap report"): structure and validation,
+and the fitted simulator a report describes (:func:`fitted_simulator`)."""
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 from handradar.atomic import atomic_write_text
@@ -93,3 +95,19 @@ def write_report(path: str | Path, report: dict, *, n_doppler: int = 64, n_colum
     path = Path(path)
     atomic_write_text(path, json.dumps(report, indent=1) + "\n")
     return path
+
+
+def fitted_simulator(report: dict, sim_settings: Mapping | None = None) -> dict:
+    """The simulator a diagnosis fitted, as ``sim`` settings (conf/sim/fitted.yaml reads them back):
+    the baseline's settings with the calibrated RCS exponent (step 0), and the baseline's effects plus
+    those the greedy selection kept, each with its fitted parameters."""
+    base = dict(report["baseline"].get("effects") or {})
+    after = report["after"]
+    params = {**{k: dict(v) for k, v in base.items()}, **{k: dict(v) for k, v in (after.get("params") or {}).items()}}
+    effects = [*base, *[e for e in after["effects"] if e not in base]]
+    settings = {k: v for k, v in dict(sim_settings or {}).items()
+                if not str(k).startswith("_") and k not in ("effects", "effect_params", "from_report")}
+    calibration = report["baseline"].get("calibration") or {}
+    if "rcs_exponent" in calibration:
+        settings["rcs_exponent"] = float(calibration["rcs_exponent"])
+    return {**settings, "effects": effects, "effect_params": {k: params.get(k, {}) for k in effects}}

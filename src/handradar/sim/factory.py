@@ -15,10 +15,12 @@ constructed; nothing mutates a built simulator. A variant with other settings is
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from handradar.errors import FormatError
 from handradar.hand.model import HandModelConfig
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
@@ -29,7 +31,25 @@ EffectSet = Mapping[str, Mapping[str, Any]]
 
 SETTINGS = ("hand", "skeleton_rate_hz", "tx_power_w", "gain_tx_dbi", "gain_rx_dbi", "rcs_exponent", "compile_combine")
 # keys of a sim config that are not settings: Hydra's, and the two that become ``effects``
-_NOT_SETTINGS = {"_target_", "_partial_", "_recursive_", "_convert_", "effects", "effect_params", "noise_draws"}
+_NOT_SETTINGS = {"_target_", "_partial_", "_recursive_", "_convert_", "effects", "effect_params", "noise_draws",
+                 "from_report"}
+
+
+def _read_fitted(path: Path) -> dict[str, Any]:
+    """The settings of a fitted_sim.yaml (checked: known settings, an effect list, parameter mappings)."""
+    if not path.is_file():
+        raise FormatError(path, "fitted simulator not found (sim.from_report: the fitted_sim.yaml a diagnose.py run wrote)")
+    try:
+        fitted = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+    except Exception as exc:  # YAML syntax: the parser's own message says where
+        raise FormatError(path, f"not a readable YAML file ({exc})") from None
+    if not isinstance(fitted, dict) or not isinstance(fitted.get("effects", []), list):
+        raise FormatError(path, "expected a mapping of simulator settings with an 'effects' list")
+    unknown = set(fitted) - set(SETTINGS) - {"effects", "effect_params"}
+    if unknown:
+        raise FormatError(path, f"unknown simulator setting(s) {sorted(unknown)}; expected some of "
+                                f"{[*SETTINGS, 'effects', 'effect_params']}")
+    return fitted
 
 
 def _plain(cfg: DictConfig | Mapping | None) -> dict[str, Any]:
@@ -56,8 +76,13 @@ class SimFactory:
     @classmethod
     def from_config(cls, sim_cfg: DictConfig | Mapping | None, radar: RadarConfig, chain: ChainConfig,
                     **overrides: Any) -> SimFactory:
-        """A factory of the ``sim`` config (``effects`` list + ``effect_params``); ``overrides`` win."""
+        """A factory of the ``sim`` config (``effects`` list + ``effect_params``); ``overrides`` win.
+        ``from_report``: a fitted simulator written by diagnose.py (fitted_sim.yaml), whose settings,
+        effects and parameters replace the config's (conf/sim/fitted.yaml)."""
         c = _plain(sim_cfg)
+        fitted = c.pop("from_report", None)
+        if fitted:
+            c.update(_read_fitted(Path(str(fitted))))
         params = c.get("effect_params") or {}
         effects = {str(n): dict(params.get(n) or {}) for n in (c.get("effects") or [])}
         settings = {k: v for k, v in c.items() if k not in _NOT_SETTINGS}
