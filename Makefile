@@ -9,7 +9,7 @@ STAMP       := $(VENV)/.installed
 JOBS        ?= 2
 ARGS        ?=
 
-.PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark clean
+.PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark fetch-data clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-15s %s\n", $$1, $$2}'
@@ -51,6 +51,9 @@ world-gallery: $(STAMP) ## PNG grid of reference-world spectrograms per gesture 
 
 gap-benchmark: $(STAMP) ## the withheld-effect validation of the gap diagnosis
 	$(PY) diagnose.py +experiment=gap_benchmark $(ARGS)
+
+fetch-data: $(STAMP) ## SFINGE3D into data/sfinge3d (git clone; DHG: handradar-fetch dataset=dhg fetch.url=URL)
+	$(VENV)/bin/handradar-fetch dataset=sfinge3d $(ARGS)
 
 clean: ## remove caches, logs and build files (keeps .venv)
 	rm -rf .cache logs outputs multirun .pytest_cache .hypothesis build *.egg-info src/*.egg-info

@@ -25,9 +25,16 @@ def experiments_dir() -> Path:
     return config_dir().parent / "experiments"
 
 
+def first_dir(*candidates: str) -> str:
+    """The first candidate that is an existing folder, else the first (so errors name where to put it)."""
+    return next((c for c in candidates if Path(c).is_dir()), candidates[0])
+
+
 def register_resolvers() -> None:
     if not OmegaConf.has_resolver("hr_root"):
         OmegaConf.register_new_resolver("hr_root", lambda: str(REPO_ROOT))
+    if not OmegaConf.has_resolver("hr_first_dir"):
+        OmegaConf.register_new_resolver("hr_first_dir", first_dir)
 
 
 register_resolvers()

@@ -37,6 +37,17 @@ def test_registry_names():
         iter_source("kinect", ".")
 
 
+@pytest.mark.parametrize("name, hint", [("sfinge3d", "`make fetch-data`"),
+                                        ("dhg", "`handradar-fetch dataset=dhg fetch.url=URL out=")])
+def test_missing_dataset_folder_says_how_to_get_it(tmp_path, name, hint):
+    root = tmp_path / "data" / name
+    with pytest.raises(FormatError) as info:
+        next(iter_source(name, root))
+    msg = str(info.value)
+    assert msg.startswith(f"{root}: no such folder: the {name} skeletons are read from here") and "\n" not in msg
+    assert hint in msg and "source.root=DIR" in msg and f"data.{name}.root=DIR" in msg
+
+
 def test_sfinge3d_items(shared_dir):
     root = shared_dir / "data" / "sfinge3d"
     items = list(iter_source("sfinge3d", root))

@@ -124,7 +124,7 @@ def run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize(("command", "usage", "missing"), [
     ([str(BIN / "handradar-ingest")], "handradar-ingest root=DIR out=FILE.h5", "root, out"),
     ([str(BIN / "handradar-world")], "handradar-world out=DIR", "out"),
-    ([str(BIN / "handradar-synth"), "source=dhg"], "handradar-synth source=sfinge3d|dhg|leap", "source.root, out"),
+    ([str(BIN / "handradar-synth"), "source=leap"], "handradar-synth source=sfinge3d|dhg|leap", "source.root, out"),
     ([sys.executable, str(REPO / "train.py"), "data=recordings", "logger=none"], "python train.py", "data.root"),
     ([sys.executable, str(REPO / "diagnose.py")], "python diagnose.py data.root=DIR", "data.root"),
 ])

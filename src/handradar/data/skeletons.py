@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from handradar.data.recording import find_recordings, read_meta
-from handradar.errors import HandradarError
+from handradar.errors import FormatError, HandradarError
 from handradar.hand.importers import dhg, sfinge3d
 from handradar.hand.leap import read_leap_jsonl
 from handradar.hand.placement import DEFAULT_CENTRE_M, place_in_radar
@@ -50,10 +50,23 @@ def _guard(errors: list | None, name: str, fn: Callable[[], SourceItem]) -> Sour
         return None
 
 
+def require_dataset_folder(name: str, root: str | Path) -> Path:
+    """``root`` as a Path; a FormatError naming it and how to get the dataset when it is not a folder."""
+    root = Path(root)
+    if not root.is_dir():
+        fetch = {"sfinge3d": f"`make fetch-data` (or `handradar-fetch dataset=sfinge3d out={root}`)",
+                 "dhg": f"`handradar-fetch dataset=dhg fetch.url=URL out={root}` (URL: the DHG2016.zip archive)"}
+        raise FormatError(root, f"no such folder: the {name} skeletons are read from here; get them with "
+                                f"{fetch[name]}, or point the source at a copy: "
+                                f"source.root=DIR (train.py presets: data.{name}.root=DIR); see docs/datasets.md")
+    return root
+
+
 def sfinge3d_items(root: str | Path, *, centre_m: Sequence[float] = DEFAULT_CENTRE_M, yaw_deg: float = 0.0,
                    fps: float = sfinge3d.FPS, wrist_offset_m: float = 0.0, thumb_metacarpal_ratio: float = 1.45,
                    errors: list | None = None) -> Iterator[SourceItem]:
     """SFINGE3D Dictionary instances over the radar (palm facing it, centred at ``centre_m``)."""
+    require_dataset_folder("sfinge3d", root)
     for path, label, name in sfinge3d.sfinge3d_files(root):
         def load(path=path, label=label, name=name) -> SourceItem:
             seq = sfinge3d.read_sfinge3d(path, fps=fps, wrist_offset_m=wrist_offset_m,
@@ -71,6 +84,7 @@ def dhg_items(root: str | Path, *, n_classes: int = 14, trim: bool = True, up_ax
               mirror: bool = False, centre_m: Sequence[float] = DEFAULT_CENTRE_M, yaw_deg: float = 0.0,
               fps: float = dhg.FPS, errors: list | None = None) -> Iterator[SourceItem]:
     """DHG-14/28 sequences over the radar; ``n_classes`` 14 (gesture) or 28 (gesture x fingers)."""
+    require_dataset_folder("dhg", root)
     names = dhg.classes(n_classes)
     files = dhg.dhg_files(root)
     info = dhg.load_info(root, trim)

@@ -107,7 +107,8 @@ def dhg_files(root: str | Path) -> list[tuple[Path, DhgKey]]:
     """Every sequence file under ``root`` with its key, in numeric (g, f, s, e) order."""
     root = Path(root)
     if not root.is_dir():
-        raise FormatError(root, "no such directory")
+        raise FormatError(root, "no such directory (expected DHG-14/28's gesture_<g> folders, e.g. from "
+                                "`handradar-fetch dataset=dhg fetch.url=URL`)")
     found = []
     for name in SKELETON_FILES:
         for p in root.glob(f"gesture_*/finger_*/subject_*/essai_*/{name}"):

@@ -97,6 +97,8 @@ def _number(name: str) -> int | None:
 def dictionary_folder(root: str | Path) -> Path:
     """``root`` itself or its ``Dictionary`` subfolder: the one holding class folders 1..13."""
     root = Path(root)
+    if not root.is_dir():
+        raise FormatError(root, "no such folder (expected SFINGE3D's Dictionary, e.g. from `make fetch-data`)")
     for cand in (root, root / "Dictionary"):
         if cand.is_dir() and any((cand / str(c)).is_dir() for c in range(1, len(CLASSES) + 1)):
             return cand
