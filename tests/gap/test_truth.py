@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
+
+import h5py
 
 from handradar.data.ingest import ingest
 from handradar.data.recording import read_truth
@@ -46,3 +49,24 @@ def test_only_the_benchmark_scoring_mentions_truth():
         if f.name != "benchmark.py":
             text = f.read_text()
             assert "read_truth" not in text and '"truth"' not in text and "'truth'" not in text, f.name
+
+
+def test_the_worlds_stored_configuration_never_reaches_the_diagnosis(tmp_path, radar, chain):
+    """A world dataset carries its settings in the attribute ``world_config``: the diagnosis must fit
+    everything from the data, so two files that differ only there give the same report."""
+    _recordings(tmp_path / "a", {})
+    ingest(tmp_path / "a", tmp_path / "base.h5", chain, progress=False)
+    reports = []
+    for i, world in enumerate(({"effects": {"palm": {"enabled": True}}}, {"effects": {"noise": {"snr_db": -6}}})):
+        path = tmp_path / f"w{i}.h5"
+        shutil.copy(tmp_path / "base.h5", path)
+        with h5py.File(path, "a") as h5:
+            h5.attrs["world_config"] = json.dumps(world)
+        data = load_dataset(path)
+        cfg = DiagnosisConfig(candidates=["antenna_pattern", "palm", "noise"], radarweightnet=False, n_boot=200)
+        rep = diagnose(data, builder(data.radar, data.chain), {}, cfg, progress=False).report
+        rep.pop("timings_s")
+        reports.append(json.dumps(rep, sort_keys=True))
+    assert reports[0] == reports[1]
+    for f in GAP_SRC.glob("*.py"):  # and no diagnosis module names it
+        assert "world_config" not in f.read_text() or f.name == "benchmark.py", f.name
