@@ -161,17 +161,20 @@ def _plane_facing(start: np.ndarray, axis: np.ndarray, length: np.ndarray, e1: n
     return np.concatenate([side, (along > 0.0)[:, None], (along + length < 0.0)[:, None]], axis=1)
 
 
-def _cone_pairs(centre: np.ndarray, reach: np.ndarray, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
-    """Bool per pair (ii, jj): some segment from the origin to a point of ball i (centre (C, 3),
-    radius reach (C,)) may meet ball j: their angular discs seen from the origin overlap and ball j
-    reaches nearer to the origin than ball i's far side (conservative)."""
+def _cone_pairs(centre: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """(S, m, m) bool for the m balls (centre (S, m, 3), radius reach (S, m)) of each of S scenes:
+    [s, i, j] where some segment from the origin to a point of ball i may meet ball j (conservative):
+    their angular discs seen from the origin overlap and ball j reaches nearer to the origin than
+    ball i's far side."""
     dist = np.linalg.norm(centre, axis=-1)
-    unit = centre / np.maximum(dist, 1e-300)[:, None]
+    unit = centre / np.maximum(dist, 1e-300)[..., None]
     sin = reach / np.maximum(dist, 1e-300)  # sine of the angular radius (>= 1: the ball holds the origin)
     cos = np.sqrt(np.clip(1.0 - sin * sin, 0.0, None))
-    cos_apart = np.einsum("pj,pj->p", unit[ii], unit[jj])
-    overlap = (sin[ii] >= 1.0) | (sin[jj] >= 1.0) | (cos_apart >= cos[ii] * cos[jj] - sin[ii] * sin[jj] - 1e-9)
-    return overlap & (dist[jj] - reach[jj] <= (dist[ii] + reach[ii]) * _GROW)
+    cos_apart = unit @ np.swapaxes(unit, 1, 2)
+    inside = sin >= 1.0
+    overlap = (inside[:, :, None] | inside[:, None, :]
+               | (cos_apart >= cos[:, :, None] * cos[:, None, :] - sin[:, :, None] * sin[:, None, :] - 1e-9))
+    return overlap & ((dist - reach)[:, None, :] <= ((dist + reach) * _GROW)[:, :, None])
 
 
 def _polygon_hits(p: np.ndarray, s: np.ndarray, e1: np.ndarray, e2: np.ndarray, radius: np.ndarray,
@@ -252,6 +255,17 @@ def _shadow_pass(z: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     return sure, band, lo, hi, inside
 
 
+def _line_layout(template: CylinderTemplate) -> tuple[np.ndarray, np.ndarray]:
+    """The template's vertices on lines: (lines, rings) template index of each (line, ring) slot,
+    -1 where there is none, for the ``sections`` generators and the two cap centres (ring 0 only);
+    and the (lines, 4) homogeneous template point of each line's ring 0."""
+    sec, rings, n_side = template.sections, template.rings, template.sections * template.rings
+    index = np.full((sec + 2, rings), -1, np.int64)
+    index[:sec] = np.arange(rings)[None] * sec + np.arange(sec)[:, None]
+    index[sec:, 0] = n_side, n_side + 1
+    return index, template.homogeneous[index[:, 0]]
+
+
 def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, template: CylinderTemplate,
                      cull: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Visible and facing counts (N, 19) of N hands ``joints`` (N, 21, 3); hands with equal
@@ -266,45 +280,43 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
     ``cull=False`` tests every facing vertex against every other cylinder of its scene (for tests:
     culling must not change a count)."""
     n, sec, rings = joints.shape[0], template.sections, template.rings
-    c, nv, n_side = n * N_BONES, template.n_vertices, template.sections * template.rings
+    c, n_lines = n * N_BONES, template.sections + 2
     start, axis, length = (x.reshape(c, *x.shape[2:]) for x in bone_frames(joints))
     e1, e2 = bone_basis(axis)
     radius = np.tile(radii, n)
     inner = radius * np.cos(np.pi / sec)  # the prism's inscribed radius
-    toward = _plane_facing(start, axis, length, e1, e2, radius, sec)[:, template.occluder_face_plane]
-    facing = _facing_of(toward, template).reshape(-1)  # (C * V,)
 
-    # lines A + z B, z = ring / (rings - 1): the sections' generators, then the cap centres (z = 0)
-    n_lines = sec + 2
-    phi = 2.0 * np.pi * np.arange(sec) / sec
-    hom_a = np.zeros((n_lines, 4))
-    hom_a[:sec, 0], hom_a[:sec, 1], hom_a[:, 3], hom_a[sec + 1, 2] = np.cos(phi), np.sin(phi), 1.0, 1.0
+    # vertices in line layout (C, lines, rings): line l, ring r is A_l + z_r B, z_r = r / (rings - 1),
+    # the sections' generators, then the bottom and top cap centres (ring 0 only)
+    index, hom_a = _line_layout(template)
+    toward = _plane_facing(start, axis, length, e1, e2, radius, sec)[:, template.occluder_face_plane]
+    groups = template.facing_groups  # vertices with the same occluder triangles share the test
+    per_group = np.zeros((c, len(groups) + 1), bool)  # last column: the layout's empty slots
+    per_group[:, :-1] = np.where(groups >= 0, toward[:, np.clip(groups, 0, None)], False).any(-1)
+    facing = per_group[:, np.where(index >= 0, template.vertex_facing_group[index], len(groups))]
+    any_facing = facing.any(-1)  # (C, lines); a line's facing rings are contiguous (all, or a cap's)
+    face_lo = np.where(any_facing, facing.argmax(-1), rings)
+    face_hi = np.where(any_facing, rings - 1 - facing[:, :, ::-1].argmax(-1), -1)
     is_side = (np.arange(n_lines) < sec).astype(np.float64)
     frame = np.stack([radius[:, None] * e1, radius[:, None] * e2, length[:, None] * axis, start], axis=-1)
     point_a = np.swapaxes(frame @ hom_a.T, 1, 2)  # (C, lines, 3)
     vec_b = length[:, None] * axis  # (C, 3): the generators' direction
     a_sq = np.einsum("clx,clx->cl", point_a, point_a).reshape(-1)  # (C * lines,)
-    length_sq = length**2
     ab2 = (2.0 * np.einsum("clx,cx->cl", point_a, vec_b) * is_side).reshape(-1)
-    # facing rings of each line: a contiguous range (all, or only the end ring on a facing cap)
-    ring_facing = np.zeros((c, n_lines, rings), bool)
-    ring_facing[:, :sec] = facing.reshape(c, nv)[:, :n_side].reshape(c, rings, sec).transpose(0, 2, 1)
-    ring_facing[:, sec:, 0] = facing.reshape(c, nv)[:, n_side:]
-    any_facing = ring_facing.any(-1)
-    face_lo = np.where(any_facing, ring_facing.argmax(-1), rings)
-    face_hi = np.where(any_facing, rings - 1 - ring_facing[:, :, ::-1].argmax(-1), -1)
+    length_sq = length**2
 
-    # bone pairs of one scene (i: source, j: occluder) whose bounding balls can shadow ...
-    cyl_scene = np.repeat(np.asarray(scene), N_BONES)
-    first = np.searchsorted(cyl_scene, cyl_scene, "left")
-    per = np.searchsorted(cyl_scene, cyl_scene, "right") - first
-    ii = np.repeat(np.arange(c), per)
-    jj = first[ii] + np.arange(len(ii)) - np.repeat(np.cumsum(per) - per, per)
-    keep = (ii != jj) & any_facing.any(1)[ii] & (length[jj] > 1e-9)
-    ii, jj = ii[keep], jj[keep]
+    # bone pairs of one scene (i: source, j: occluder) whose bounding balls can shadow, from each
+    # scene's (m, m) matrix (scenes padded to the largest)
+    _, first, size = np.unique(np.repeat(np.asarray(scene), N_BONES), return_index=True, return_counts=True)
+    slot = np.arange(size.max())
+    valid = slot < size[:, None]
+    pad = np.where(valid, first[:, None] + slot, 0)  # (S, m) cylinder of each slot
     centre = start + 0.5 * length[:, None] * axis
-    keep = _cone_pairs(centre, np.hypot(0.5 * length, radius), ii, jj) | (not cull)
-    ii, jj = ii[keep], jj[keep]
+    ok = _cone_pairs(centre[pad], np.hypot(0.5 * length, radius)[pad]) | (not cull)
+    ok &= (valid & any_facing.any(1)[pad])[:, :, None] & (valid & (length[pad] > 1e-9))[:, None, :]
+    ok &= ~np.eye(len(slot), dtype=bool)
+    s_, a_, b_ = np.nonzero(ok)
+    ii, jj = pad[s_, a_], pad[s_, b_]
     # ... and whose source capsule can meet the occluder's five conditions
     g_all, h_all = _shadow_constraints(start, axis, length, radius)
     g = g_all[jj]  # (P, 5, 3)
@@ -321,10 +333,8 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
     funcs = np.concatenate([g_all, axis[:, None], (start - as_j[:, None] * axis)[:, None]], axis=1)  # (C, 7, 3)
     occ_k = np.stack([as_j, as_j + length, np.einsum("cj,cj->c", start, start) - as_j**2, inner**2 * (1.0 - 1e-9),
                       radius**2 * _GROW, (inner - RAY_OFFSET_M) ** 2])  # (6, C)
-    blocked = np.zeros(c * nv, bool)
-    buried = np.zeros(c * nv, bool)
-    line_vertex = np.r_[np.arange(sec), n_side, n_side + 1]  # template index of each line's ring 0
-    ring_step = np.r_[np.full(sec, sec), 0, 0]  # template index step per ring
+    blocked = np.zeros(c * n_lines * rings, bool)  # line layout, flat
+    buried = np.zeros_like(blocked)
     for p0 in range(0, len(ii), _PAIR_CHUNK):
         i_c, j_c = ii[p0:p0 + _PAIR_CHUNK], jj[p0:p0 + _PAIR_CHUNK]
         npc = len(i_c)
@@ -368,23 +378,22 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
         row_k[7:13] = occ_k[:, j_r]
         row_k[12] = np.where(touch[p0 + pr], row_k[12], -1.0)
         k = np.repeat(row_k, count, axis=1)
-        start_of = np.repeat(np.cumsum(count) - count, count)
-        ring = np.repeat(lo_row, count) + np.arange(len(start_of)) - start_of
+        rep = np.repeat(np.arange(len(pr)), count)  # each candidate's row
+        ring = lo_row[rep] + np.arange(len(rep)) - (np.cumsum(count) - count)[rep]
         z = ring / (rings - 1)
         sure, band, lo, hi, inside = _shadow_pass(z, k)
-        flat = np.repeat(i_r * nv + line_vertex[ln], count) + ring * np.repeat(ring_step[ln], count)
         if band.any():
             b = np.flatnonzero(band)
-            rep_b = np.repeat(np.arange(len(pr)), count)[b]
-            jb = j_r[rep_b]
-            p = point_a.reshape(-1, 3)[il[rep_b]] + (z[b] * side[rep_b])[:, None] * vec_b[i_r[rep_b]]
+            rb, jb = rep[b], j_r[rep[b]]
+            p = point_a.reshape(-1, 3)[il[rb]] + (z[b] * side[rb])[:, None] * vec_b[i_r[rb]]
             sure[b] = _polygon_hits(p, start[jb], e1[jb], e2[jb], radius[jb], lo[b], hi[b], sec)
+        flat = (il * rings)[rep] + ring
         blocked[flat[sure]] = True
         buried[flat[inside]] = True  # inside j implies the segment meets j: buried is blocked too
-    facing &= ~buried
+    facing = facing.reshape(-1) & ~buried
     visible = facing & ~blocked
-    return (visible.reshape(n, N_BONES, nv).sum(-1).astype(np.int32),
-            facing.reshape(n, N_BONES, nv).sum(-1).astype(np.int32))
+    return (visible.reshape(n, N_BONES, -1).sum(-1).astype(np.int32),
+            facing.reshape(n, N_BONES, -1).sum(-1).astype(np.int32))
 
 
 def visibility_step(joints: np.ndarray, *, radii: np.ndarray | None = None,
