@@ -19,7 +19,9 @@ Backends (same definitions; ``HandModelConfig.backend``):
 - ``"analytic"`` (what ``"auto"`` picks): closed form, numpy, all cast steps of a window in one
   batch. A vertex's segment meets a prism iff, clipped to the prism's slab, it enters the
   inscribed cylinder (sure), or enters the circumscribed one and survives clipping by the side
-  planes (the thin band between them); buried = inside another's inscribed prism, as below.
+  planes (the thin band between them); buried = inside another's inscribed prism, as below. A
+  prism around the radar itself blocks a vertex iff the segment's far end is outside it (the ray
+  caster counts surface crossings).
   Candidate (vertex, cylinder) pairs are culled conservatively first: bounding balls seen from
   the radar, then five linear conditions per occluder (depth, wedge and slab, _shadow_constraints)
   that bound each vertex line's ring range. Measured against the ray casters on 43 windows (39
@@ -194,6 +196,18 @@ def _polygon_hits(p: np.ndarray, s: np.ndarray, e1: np.ndarray, e2: np.ndarray, 
     return (lo <= hi) & ~((u == 0.0) & (w < 0.0)).any(-1)
 
 
+def _in_prism(x: np.ndarray, s: np.ndarray, a: np.ndarray, e1: np.ndarray, e2: np.ndarray, length: np.ndarray,
+              radius: np.ndarray, sections: int) -> np.ndarray:
+    """(M,) bool: points x (M, 3) inside (or on) the closed prism of each row (start s, unit axis a,
+    cross-section axes e1 e2, length, circumradius; metres)."""
+    rel = x - s
+    along = np.einsum("mj,mj->m", rel, a)
+    theta = 2.0 * np.pi * (np.arange(sections) + 0.5) / sections
+    face = (np.einsum("mj,mj->m", rel, e1)[:, None] * np.cos(theta)
+            + np.einsum("mj,mj->m", rel, e2)[:, None] * np.sin(theta)).max(-1)
+    return (along >= 0.0) & (along <= length) & (face <= radius * np.cos(np.pi / sections))
+
+
 def _shadow_constraints(start: np.ndarray, axis: np.ndarray, length: np.ndarray,
                         radius: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Five linear conditions g . p <= h, (C, 5, 3) and (C, 5), that every point p shadowed by a
@@ -299,7 +313,7 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
     face_hi = np.where(any_facing, rings - 1 - facing[:, :, ::-1].argmax(-1), -1)
     is_side = (np.arange(n_lines) < sec).astype(np.float64)
     frame = np.stack([radius[:, None] * e1, radius[:, None] * e2, length[:, None] * axis, start], axis=-1)
-    point_a = np.swapaxes(frame @ hom_a.T, 1, 2)  # (C, lines, 3)
+    point_a = np.ascontiguousarray(np.swapaxes(frame @ hom_a.T, 1, 2))  # (C, lines, 3)
     vec_b = length[:, None] * axis  # (C, 3): the generators' direction
     a_sq = np.einsum("clx,clx->cl", point_a, point_a).reshape(-1)  # (C * lines,)
     ab2 = (2.0 * np.einsum("clx,cx->cl", point_a, vec_b) * is_side).reshape(-1)
@@ -330,6 +344,9 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
     # per occluder: the five conditions, a_j and s_j - (a_j . s_j) a_j as linear functionals, and
     # the exact tests' scalars
     as_j = np.einsum("cj,cj->c", axis, start)
+    # a prism holding the radar (a hand on the antenna) meets a segment to it iff the segment's
+    # far end is outside: the ray caster counts surface crossings
+    holds = _in_prism(np.zeros_like(start), start, axis, e1, e2, length, radius, sec) & (length > 1e-9)
     funcs = np.concatenate([g_all, axis[:, None], (start - as_j[:, None] * axis)[:, None]], axis=1)  # (C, 7, 3)
     occ_k = np.stack([as_j, as_j + length, np.einsum("cj,cj->c", start, start) - as_j**2, inner**2 * (1.0 - 1e-9),
                       radius**2 * _GROW, (inner - RAY_OFFSET_M) ** 2])  # (6, C)
@@ -385,8 +402,14 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
         if band.any():
             b = np.flatnonzero(band)
             rb, jb = rep[b], j_r[rep[b]]
-            p = point_a.reshape(-1, 3)[il[rb]] + (z[b] * side[rb])[:, None] * vec_b[i_r[rb]]
+            p = point_a.reshape(c * n_lines, 3)[il[rb]] + (z[b] * side[rb])[:, None] * vec_b[i_r[rb]]
             sure[b] = _polygon_hits(p, start[jb], e1[jb], e2[jb], radius[jb], lo[b], hi[b], sec)
+        if holds[j_r].any():
+            h_ = np.flatnonzero(holds[j_r[rep]])
+            rh, jh = rep[h_], j_r[rep[h_]]
+            p = point_a.reshape(c * n_lines, 3)[il[rh]] + (z[h_] * side[rh])[:, None] * vec_b[i_r[rh]]
+            p *= (1.0 - RAY_OFFSET_M / np.linalg.norm(p, axis=-1))[:, None]
+            sure[h_] = ~_in_prism(p, start[jh], axis[jh], e1[jh], e2[jh], length[jh], radius[jh], sec)
         flat = (il * rings)[rep] + ring
         blocked[flat[sure]] = True
         buried[flat[inside]] = True  # inside j implies the segment meets j: buried is blocked too
