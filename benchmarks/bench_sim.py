@@ -8,7 +8,12 @@
   windows (the cache's ``active`` flags skip the absent hand); the torch.compile'd weighted sum;
   one training step (forward + backward).
 
-Threads: HANDRADAR_BENCH_THREADS (default 2); HANDRADAR_BENCH_COMPILE=0 skips the compiled variant.
+The cold figures break the window's time down: visibility alone (handradar.hand.visibility, the
+hand model's stride and backend), the rest of the features, slot profiles, and net + weighted sum +
+chain; each is the best of ``HANDRADAR_BENCH_COLD_REPEAT`` (default 3) passes over the windows.
+
+Threads: HANDRADAR_BENCH_THREADS (default 2); HANDRADAR_BENCH_COMPILE=0 skips the compiled variant;
+HANDRADAR_BENCH_SIM=cold (or cached) runs only that part (default: both).
 
 Default radar and chain (1.6 s windows, 2048 chirps, 8 gated bins), skeletons at 100 Hz.
 Run: ``PYTHONPATH=$PWD/src:$PWD python -m benchmarks bench_sim``.
@@ -24,7 +29,9 @@ from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from benchmarks.common import Result, best_time
+from handradar.hand.mesh import default_template
 from handradar.hand.model import HandModelConfig
+from handradar.hand.visibility import visibility
 from handradar.metrics import fast_ssim_loss
 from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.provenance import REPO_ROOT
@@ -41,6 +48,43 @@ def _radar():
     return instantiate(OmegaConf.load(REPO_ROOT / "conf" / "radar" / "awr1843.yaml"))
 
 
+def _cold(windows, times, radar, hand, sim, net) -> list[Result]:
+    """Skeleton -> spectrogram with nothing cached, one window at a time, and where its time goes."""
+    repeat = int(os.environ.get("HANDRADAR_BENCH_COLD_REPEAT", "3"))
+    n = len(windows)
+
+    def cold_one(pos, mask):
+        f = bone_features(pos, times, mask, radar.wavelength_m, hand).features
+        with torch.no_grad():
+            sk, mk = torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
+            w = net(torch.as_tensor(f[None]), mk)
+            return sim(sk, mk, w)
+
+    template = default_template(hand.sections, hand.rings)
+    joints = [hand.joints(p) for p, _ in windows]
+    t_cold = best_time(lambda: [cold_one(*w) for w in windows], repeat=repeat) / n
+    t_vis = best_time(lambda: [visibility(j, m, template=template, backend=hand.backend, stride=hand.visibility_stride)
+                               for j, (_, m) in zip(joints, windows)], repeat=repeat) / n
+    t_feat = best_time(lambda: [bone_features(p, times, m, radar.wavelength_m, hand) for p, m in windows],
+                       repeat=repeat) / n
+    sks = [torch.as_tensor(p[None]) for p, _ in windows]
+    mks = [torch.as_tensor(m[None]) for _, m in windows]
+    feats = [torch.as_tensor(bone_features(p, times, m, radar.wavelength_m, hand).features[None]) for p, m in windows]
+    with torch.no_grad():
+        t_prof = best_time(lambda: [sim.slot_profiles(s, m) for s, m in zip(sks, mks)], repeat=repeat) / n
+        prof = [sim.slot_profiles(s, m) for s, m in zip(sks, mks)]
+        t_rest = best_time(lambda: [sim.spectrogram(sim.combine(p, net(f, m))) for p, f, m in zip(prof, feats, mks)],
+                           repeat=repeat) / n
+    threads = torch.get_num_threads()
+    return [Result("cold (features + profiles + net + chain)", 1.0 / t_cold, "spectrograms/s",
+                   f"{threads} threads; half one-hand, half two-hand windows"),
+            Result(f"cold: visibility ({hand.backend}, stride {hand.visibility_stride})", t_vis, "s/window",
+                   f"{len(times)} steps, 1 or 2 hands"),
+            Result("cold: features (visibility + retargeting + rcs + derivatives)", t_feat, "s/window"),
+            Result("cold: slot profiles (closed-form range response)", t_prof, "s/window"),
+            Result("cold: net + weighted sum + chain", t_rest, "s/window")]
+
+
 def run() -> list[Result]:
     threads = int(os.environ.get("HANDRADAR_BENCH_THREADS", "2"))
     torch.set_num_threads(threads)
@@ -55,24 +99,13 @@ def run() -> list[Result]:
 
     # ---- cold: skeleton -> spectrogram, one window at a time -----------------------------------------
     windows = [window(times, hands=h, seed=s) for s, h in enumerate((1, 2, 1, 2))]
-
-    def cold_one(pos, mask):
-        f = bone_features(pos, times, mask, radar.wavelength_m, hand).features
-        with torch.no_grad():
-            sk, mk = torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
-            w = net(torch.as_tensor(f[None]), mk)
-            return sim(sk, mk, w)
-
-    t_cold = best_time(lambda: [cold_one(*w) for w in windows], repeat=1) / len(windows)
-    t_feat = best_time(lambda: [bone_features(p, times, m, radar.wavelength_m, hand) for p, m in windows], repeat=1) / len(windows)
     sk = torch.as_tensor(np.stack([w[0] for w in windows]))
     mk = torch.as_tensor(np.stack([w[1] for w in windows]))
-    with torch.no_grad():
-        t_prof = best_time(lambda: sim.slot_profiles(sk, mk), repeat=2) / len(windows)
-    out += [Result("cold (features + profiles + net + chain)", 1.0 / t_cold, "spectrograms/s",
-                   f"{threads} threads; half one-hand, half two-hand windows"),
-            Result("cold: features (ray-cast visibility, stride %d)" % hand.visibility_stride, t_feat, "s/window"),
-            Result("cold: slot profiles (closed-form range response)", t_prof, "s/window")]
+    parts = os.environ.get("HANDRADAR_BENCH_SIM", "cold,cached").split(",")
+    if "cold" in parts:
+        out += _cold(windows, times, radar, hand, sim, net)
+    if "cached" not in parts:
+        return out
 
     # ---- cached: packed profiles + features in memory --------------------------------------------------
     with torch.no_grad():

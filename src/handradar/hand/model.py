@@ -21,9 +21,9 @@ class HandModelConfig:
     retarget: rebuild the skeleton with standard bone lengths (handradar.hand.retarget).
     hand_scale: multiplies the standard lengths.
     sections, rings: cylinder mesh resolution (vertices per bone = sections * rings + 2).
-    backend: ray casting backend of handradar.hand.visibility.
+    backend: visibility backend of handradar.hand.visibility (auto: the analytic one).
     visibility_stride: ray cast every n-th skeleton step (1 = all; 2 = 50 Hz at the 100 Hz rows,
-        counts interpolated in between: ray casting two hands costs ~35 ms a step).
+        counts interpolated in between).
     """
 
     retarget: bool = True
@@ -41,6 +41,6 @@ class HandModelConfig:
         return retarget(pos, standard_lengths(self.hand_scale)).numpy()
 
     def key(self) -> dict:
-        """Fields that change the features (the ray-casting backend does not)."""
+        """Fields that change the features (the backends agree within one vertex: not part of the key)."""
         return {"retarget": self.retarget, "hand_scale": self.hand_scale, "sections": self.sections,
                 "rings": self.rings, "visibility_stride": self.visibility_stride}
