@@ -71,7 +71,11 @@ def synth_splits(labels: np.ndarray, meta: dict[str, np.ndarray], seed: int, *, 
             log.warning("synth_fit: no meta field %r, skipping the %s generalisation", field, shift)
             continue
         values = meta[field]
-        inside = np.isin(values, default_train_values(shift, values, seed))
+        try:
+            inside = np.isin(values, default_train_values(shift, values, seed))
+        except ValueError as exc:  # e.g. one subject only: this shift cannot be formed from the data
+            log.warning("synth_fit: skipping the %s generalisation (%s)", shift, exc)
+            continue
         tr, te = np.flatnonzero(inside), np.flatnonzero(~inside)
         if len(tr) and len(te):
             out[f"_{shift}"] = (cap(tr, max_train_rows, 10 + k), cap(te, max_test_rows, 20 + k))
