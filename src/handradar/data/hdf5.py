@@ -36,8 +36,12 @@ class DatasetWriter:
     """Append examples row by row into resizable datasets of a temporary file.
 
     Use through :func:`open_writer`, which moves the file into place only when the block ends
-    without an exception (Ctrl-C included).
+    without an exception (Ctrl-C included). Rows are buffered and written ``BLOCK`` at a time:
+    h5py's per-call overhead (a resize and a write per dataset) cost more than the data of a row.
     """
+
+    BLOCK = 64  # rows per write; the spectrograms' chunk
+    COLUMNS = ("spectrograms", "labels", "skeletons", "hand_mask", "window_start_s")
 
     def __init__(self, h5: h5py.File, n_steps: int, spec_shape: tuple[int, int]) -> None:
         self.h5 = h5
@@ -52,24 +56,41 @@ class DatasetWriter:
         h5.create_dataset("hand_mask", (0, n_steps, 2), maxshape=(None, n_steps, 2), dtype=bool,
                           chunks=(chunk, n_steps, 2))
         h5.create_dataset("window_start_s", (0,), maxshape=(None,), dtype="f8", chunks=(1024,))
+        self._datasets = {name: h5[name] for name in self.COLUMNS}
+        self._row_shapes = {name: ds.shape[1:] for name, ds in self._datasets.items()}
+        self._pending: dict[str, list[np.ndarray]] = {name: [] for name in self.COLUMNS}
 
     def append(self, spectrogram: np.ndarray, label: int, skeleton: np.ndarray, hand_mask: np.ndarray,
                window_start_s: float, meta: dict[str, object]) -> None:
-        i = self.n
-        for name in ("spectrograms", "labels", "skeletons", "hand_mask", "window_start_s"):
-            self.h5[name].resize(i + 1, axis=0)
-        self.h5["spectrograms"][i] = spectrogram
-        self.h5["labels"][i] = label
-        self.h5["skeletons"][i] = skeleton
-        self.h5["hand_mask"][i] = hand_mask
-        self.h5["window_start_s"][i] = window_start_s
         if self.n and set(meta) != set(self.meta):
             raise ValueError(f"meta fields {sorted(meta)} differ from the first row's {sorted(self.meta)}")
+        rows = []
+        for name, value in zip(self.COLUMNS, (spectrogram, label, skeleton, hand_mask, window_start_s)):
+            row = np.array(value)  # a copy: the caller may reuse its buffer before the block is written
+            if row.shape != self._row_shapes[name]:  # fail here, not at the block's write
+                row = np.array(np.broadcast_to(row, self._row_shapes[name]))
+            rows.append(row)
+        for name, row in zip(self.COLUMNS, rows):
+            self._pending[name].append(row)
         for k, v in meta.items():
             self.meta.setdefault(k, []).append(v)
         self.n += 1
+        if len(self._pending["labels"]) >= self.BLOCK:
+            self._flush()
+
+    def _flush(self) -> None:
+        """Write the buffered rows (h5py converts them to each dataset's dtype, as row by row)."""
+        k = len(self._pending["labels"])
+        if not k:
+            return
+        for name, ds in self._datasets.items():
+            lo = ds.shape[0]
+            ds.resize(lo + k, axis=0)
+            ds[lo:lo + k] = np.stack(self._pending[name])
+            self._pending[name].clear()
 
     def finish(self) -> None:
+        self._flush()
         g = self.h5.create_group("meta")
         for k, values in self.meta.items():
             if all(isinstance(v, (bool, np.bool_)) for v in values):

@@ -5,9 +5,11 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+import torch
 from tqdm.auto import tqdm
 
 from handradar.data.examples import recording_example, skeleton_steps
@@ -99,6 +101,25 @@ def radar_differences(radar: RadarConfig, reference: RadarConfig, reference_name
     return out
 
 
+@contextlib.contextmanager
+def _one_torch_thread() -> Iterator[None]:
+    """Run torch single-threaded inside the block, then restore the thread count.
+
+    One recording's tensors (a 6 MB ADC cube, then kilobytes) are too small for intra-op threads
+    to pay off, and where other processes share the cores every parallel step waits for a
+    descheduled thread: chain + skeleton window took 57 ms per recording with 2 threads against
+    7 ms with one on the loaded 2-core development machine. Results do not change: the steps torch
+    splits across threads at this size (window product, range FFT, copies) compute each element
+    or row alone; the reductions run on tensors below its parallel grain size.
+    """
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(n)
+
+
 def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_rate_hz: float = 100.0,
            strict: bool = False, allow_truncated: bool = False, coverage_tolerance_s: float = 0.05,
            progress: bool = True) -> IngestSummary:
@@ -151,6 +172,7 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
         log.info("reference radar configuration: %s (%d of %d recordings)", name_of(ref), n_ref, len(radars))
 
     with contextlib.ExitStack() as stack:
+        stack.enter_context(_one_torch_thread())
         writer = None
         for folder in tqdm(list(radars), desc="ingest", unit="rec", disable=not progress):
             try:

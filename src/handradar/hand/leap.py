@@ -11,8 +11,10 @@ Frames without hands are kept as untracked steps (mask False); nothing is invent
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+import operator
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -56,6 +58,12 @@ def _hand_id(path: Path, lineno: int, what: str, value: object) -> int | str:
 
 
 _NUMBER = (int, float)  # exact types: json gives bool for true/false, which must not pass as a number
+_PLAIN_NUMBERS = frozenset(_NUMBER)
+_NO_FINGERS = (None,) * (N_JOINTS - 1)
+_ALL_FINGERS = 0b11111
+_JOINT_VALUES = operator.itemgetter(*LEAP_JOINT_FIELDS)  # one C call per pointable; KeyError if one is missing
+_FINGER_SLICES = tuple(slice(1 + 4 * f, 5 + 4 * f) for f in range(5))  # finger f's joints in canonical order
+_BATCH_HANDS = 2048  # hands whose raw JSON values are kept before converting them: bounds the memory of long files
 
 
 def _joint_block(path: Path, lineno: int, slot: int, raw: list[object]) -> np.ndarray:
@@ -78,8 +86,12 @@ def _joint_block(path: Path, lineno: int, slot: int, raw: list[object]) -> np.nd
     raise AssertionError("unreachable: a vector failed the fast check but passed the slow one")
 
 
-def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.ndarray, np.ndarray]:
-    """One frame -> (timestamp_us, joints (2, 21, 3) Leap mm, tracked (2,))."""
+def _frame_vectors(obj: object, path: Path, lineno: int) -> tuple[float, list[list[object] | None]]:
+    """Every check of one frame but the joint numbers: (timestamp_us, per slot its 21 raw JSON joint
+    values in canonical order, or None where the hand is untracked).
+
+    The numbers are left to :func:`_joint_block` (one frame) or :func:`_joint_arrays` (a whole file).
+    """
     if not isinstance(obj, dict):
         raise FormatError(path, f"expected a JSON object per line, found {type(obj).__name__}", line=lineno)
     ts = finite_number(obj.get("timestamp"))
@@ -90,9 +102,7 @@ def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.nd
     pointables = obj.get("pointables", [])
     if not isinstance(hands, list) or not isinstance(pointables, list):
         raise FormatError(path, "'hands' and 'pointables' must be lists", line=lineno)
-    joints = np.zeros((2, N_JOINTS, 3), dtype=np.float64)
-    tracked = np.zeros(2, dtype=bool)
-    raw: list[list[object]] = [[None] * N_JOINTS, [None] * N_JOINTS]  # JSON values, validated per hand below
+    raw: list[list[object] | None] = [None, None]  # per slot: JSON values, their numbers checked later
     slot_of_id: dict[object, int] = {}
     for hand in hands:
         if not isinstance(hand, dict):
@@ -101,40 +111,84 @@ def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.nd
         if kind not in HANDS:
             raise FormatError(path, f"hand 'type' must be 'right' or 'left', found {kind!r:.40}", line=lineno)
         slot = HANDS.index(kind)
-        if tracked[slot]:
+        if raw[slot] is not None:
             continue  # a second hand of the same side: keep the first, as Leap's own API does
         if "id" not in hand:
             raise FormatError(path, f"{kind} hand has no 'id' (pointables refer to their hand by it)", line=lineno)
         hid = _hand_id(path, lineno, f"{kind} hand 'id'", hand["id"])
         if "wrist" not in hand:
             raise FormatError(path, f"{kind} hand (id {hid!r}) has no 'wrist'", line=lineno)
-        raw[slot][0] = hand["wrist"]
-        tracked[slot] = True
+        raw[slot] = [hand["wrist"], *_NO_FINGERS]
         slot_of_id[hid] = slot
-    found = [[False] * 5, [False] * 5]
+    found = [0, 0]  # per slot: bit f set once finger f has its pointable
     for p in pointables:
         if not isinstance(p, dict):
             raise FormatError(path, "each pointable must be a JSON object", line=lineno)
-        slot = slot_of_id.get(_hand_id(path, lineno, "pointable 'handId'", p.get("handId")))
+        hid = p.get("handId")
+        if type(hid) is not int and type(hid) is not str:  # the common case without a call; else check it
+            hid = _hand_id(path, lineno, "pointable 'handId'", hid)
+        slot = slot_of_id.get(hid)
         if slot is None:
             continue  # pointable of an ignored or unknown hand
         f = p.get("type")
         if type(f) is not int or not 0 <= f <= 4:
             raise FormatError(path, f"pointable 'type' must be 0..4 (thumb..pinky), found {f!r:.40}", line=lineno)
-        if found[slot][f]:
+        if found[slot] >> f & 1:
             raise FormatError(path, f"{HANDS[slot]} hand has two pointables of type {f}", line=lineno)
-        for j, key in enumerate(LEAP_JOINT_FIELDS):
-            if key not in p:
-                raise FormatError(path, f"{HANDS[slot]} hand finger {f} has no '{key}'", line=lineno)
-            raw[slot][1 + 4 * f + j] = p[key]
-        found[slot][f] = True
-    for slot in np.flatnonzero(tracked):
-        if not all(found[slot]):
-            missing = [f for f in range(5) if not found[slot][f]]
+        try:
+            raw[slot][_FINGER_SLICES[f]] = _JOINT_VALUES(p)  # type: ignore[index]
+        except KeyError:
+            key = next(k for k in LEAP_JOINT_FIELDS if k not in p)
+            raise FormatError(path, f"{HANDS[slot]} hand finger {f} has no '{key}'", line=lineno) from None
+        found[slot] |= 1 << f
+    for slot in (0, 1):
+        if raw[slot] is not None and found[slot] != _ALL_FINGERS:
+            if slot == 1 and raw[0] is not None:
+                _joint_block(path, lineno, 0, raw[0])  # the right hand's numbers are checked before the left's fingers
+            missing = [f for f in range(5) if not found[slot] >> f & 1]
             raise FormatError(path, f"{HANDS[slot]} hand is tracked but finger(s) {missing} have no pointable "
                                     "(expected all five, types 0..4)", line=lineno)
-        joints[slot] = _joint_block(path, lineno, int(slot), raw[slot])
-    return float(ts), joints, tracked
+    return float(ts), raw
+
+
+def parse_leap_frame(obj: object, path: Path, lineno: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """One frame -> (timestamp_us, joints (2, 21, 3) Leap mm, tracked (2,))."""
+    ts, raw = _frame_vectors(obj, path, lineno)
+    joints = np.zeros((2, N_JOINTS, 3), dtype=np.float64)
+    tracked = np.zeros(2, dtype=bool)
+    for slot, values in enumerate(raw):
+        if values is not None:
+            joints[slot] = _joint_block(path, lineno, slot, values)
+            tracked[slot] = True
+    return ts, joints, tracked
+
+
+def _joint_arrays(path: Path, blocks: list[tuple[int, int, list[object]]], vectors: list[object]) -> np.ndarray:
+    """The raw joint values of many hands -> (hands, 21, 3) float64.
+
+    blocks: (line, slot, its 21 raw values) per hand; vectors: all their raw values, concatenated.
+    Fast path, C loops only: every vector a 3-sequence, every coordinate an int or a float (bools,
+    strings, nulls and nested values fail), one conversion of the whole file that converts each
+    value as :func:`_joint_block` does (``float(value)``). Anything unusual falls back to
+    :func:`_joint_block`, hand by hand in file order, which names the first bad field and its line.
+    """
+    if not blocks:
+        return np.zeros((0, N_JOINTS, 3), dtype=np.float64)
+    try:
+        flat = list(itertools.chain.from_iterable(vectors)) if set(map(len, vectors)) == {3} else None
+        if flat is not None and set(map(type, flat)) <= _PLAIN_NUMBERS:
+            out = np.fromiter(flat, dtype=np.float64, count=len(flat))
+            if np.isfinite(out).all():
+                return out.reshape(len(blocks), N_JOINTS, 3)
+    except (TypeError, OverflowError):  # a value without a length (a number, null); an integer beyond float range
+        pass
+    return np.stack([_joint_block(path, lineno, slot, values) for lineno, slot, values in blocks])
+
+
+def _check_joint_blocks(path: Path, blocks: list[tuple[int, int, list[object]]]) -> None:
+    """Raise the FormatError of the first hand in ``blocks`` whose joint values are bad, if any."""
+    for lineno, slot, values in blocks:
+        _joint_block(path, lineno, slot, values)
 
 
 def leap_matrix(value: object, source: str | Path) -> np.ndarray:
@@ -159,39 +213,57 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
     path = Path(path)
     m = leap_matrix(leap_to_radar.tolist() if isinstance(leap_to_radar, np.ndarray) else leap_to_radar, path)
     stamps: list[float] = []
-    frames: list[np.ndarray] = []
-    masks: list[np.ndarray] = []
+    blocks: list[tuple[int, int, list[object]]] = []  # (line, slot, raw joint values) of tracked hands not yet converted
+    vectors: list[object] = []  # the raw joint values of those blocks, concatenated
+    converted: list[np.ndarray] = []  # (hands, 21, 3) Leap mm of the blocks converted so far, in file order
+    where: list[int] = []  # 2 * frame index + slot of every tracked hand
     try:
         fh = path.open("rb")  # bytes: a decoding error is then reported with its line number
     except OSError as exc:
         raise FormatError(path, f"cannot read: {exc.strerror}") from None
     with fh:
-        for lineno, raw in enumerate(fh, start=1):
-            try:
-                line = raw.decode("utf-8")
-            except UnicodeDecodeError:
-                raise FormatError(path, "not UTF-8 text", line=lineno) from None
-            if not line.strip():
-                continue
-            try:
-                obj = json.loads(line)
-            except json.JSONDecodeError as exc:
-                raise FormatError(path, f"invalid JSON ({exc.msg} at column {exc.colno})", line=lineno) from None
-            except ValueError as exc:  # e.g. an integer literal beyond Python's 4300-digit conversion limit
-                raise FormatError(path, f"invalid JSON ({exc})", line=lineno) from None
-            except RecursionError:
-                raise FormatError(path, "JSON nested too deeply", line=lineno) from None
-            ts, joints, tracked = parse_leap_frame(obj, path, lineno)
-            if stamps and ts <= stamps[-1]:
-                raise FormatError(path, f"timestamps must increase: {ts:.0f} us follows {stamps[-1]:.0f} us", line=lineno)
-            stamps.append(ts)
-            frames.append(joints)
-            masks.append(tracked)
+        try:
+            for lineno, raw in enumerate(fh, start=1):
+                try:
+                    line = raw.decode("utf-8")
+                except UnicodeDecodeError:
+                    raise FormatError(path, "not UTF-8 text", line=lineno) from None
+                if not line.strip():
+                    continue
+                try:
+                    obj = json.loads(line)
+                except json.JSONDecodeError as exc:
+                    raise FormatError(path, f"invalid JSON ({exc.msg} at column {exc.colno})", line=lineno) from None
+                except ValueError as exc:  # e.g. an integer literal beyond Python's 4300-digit conversion limit
+                    raise FormatError(path, f"invalid JSON ({exc})", line=lineno) from None
+                except RecursionError:
+                    raise FormatError(path, "JSON nested too deeply", line=lineno) from None
+                ts, per_slot = _frame_vectors(obj, path, lineno)
+                for slot, values in enumerate(per_slot):
+                    if values is not None:
+                        blocks.append((lineno, slot, values))
+                        vectors.extend(values)
+                        where.append(2 * len(stamps) + slot)
+                if stamps and ts <= stamps[-1]:
+                    raise FormatError(path, f"timestamps must increase: {ts:.0f} us follows {stamps[-1]:.0f} us",
+                                      line=lineno)
+                stamps.append(ts)
+                if len(blocks) >= _BATCH_HANDS:
+                    converted.append(_joint_arrays(path, blocks, vectors))
+                    blocks, vectors = [], []
+        except FormatError:
+            # joint numbers are checked a batch of lines at a time; a bad one on an earlier line (or
+            # earlier on this one) comes first in the file, so it is the error to report
+            _check_joint_blocks(path, blocks)
+            raise
+    converted.append(_joint_arrays(path, blocks, vectors))  # before the frame count: a bad number comes earlier
     if len(stamps) < 2:
         raise FormatError(path, f"expected at least 2 frames, found {len(stamps)}")
-    joints_mm = np.stack(frames)
+    joints_mm = np.zeros((len(stamps), 2, N_JOINTS, 3), dtype=np.float64)
+    mask = np.zeros((len(stamps), 2), dtype=bool)
+    joints_mm.reshape(-1, N_JOINTS, 3)[where] = np.concatenate(converted)  # a view: (frames * 2, ...) rows
+    mask.reshape(-1)[where] = True
     radar = joints_mm @ m[:3, :3].T + m[:3, 3]
-    mask = np.stack(masks)
     too_big = ~(np.abs(radar) < 1e6).all(axis=(-2, -1)) & mask  # metres; float32 would overflow far beyond
     if too_big.any():
         t = int(np.argmax(too_big.any(axis=1)))

@@ -57,12 +57,13 @@ def read_adc(path: str | Path, cfg: RadarConfig, *, allow_truncated: bool = Fals
         raise FormatError(path, f"cannot read: {exc.strerror}") from None
     n_frames = _expected_frames(cfg, path, size, allow_truncated)
     count = n_frames * cfg.frame_bytes() // 2
-    raw = np.fromfile(path, dtype="<i2", count=count)
-    raw = raw.reshape(n_frames, cfg.chirps_per_frame, cfg.n_rx, cfg.n_samples // 2, 4)
-    out = np.empty((n_frames, cfg.chirps_per_frame, cfg.n_rx, cfg.n_samples), dtype=np.complex64)
-    out.real = raw[..., 0:2].reshape(out.shape)
-    out.imag = raw[..., 2:4].reshape(out.shape)
-    return out
+    raw = np.fromfile(path, dtype="<i2", count=count).reshape(-1, 4)  # I(n) I(n+1) Q(n) Q(n+1)
+    out = np.empty(raw.shape, dtype=np.float32)  # re(n) im(n) re(n+1) im(n+1): complex64 pairs
+    # one long strided copy per column: numpy's copy loop is fast along a long axis and slow
+    # along a short one, so this beats a (..., 2, 2) transpose by about 4x (int16 -> float32 is exact)
+    for dst, src in enumerate((0, 2, 1, 3)):
+        out[:, dst] = raw[:, src]
+    return out.view(np.complex64).reshape(n_frames, cfg.chirps_per_frame, cfg.n_rx, cfg.n_samples)
 
 
 def quantise(adc: np.ndarray) -> tuple[np.ndarray, int]:
