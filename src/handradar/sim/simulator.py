@@ -8,7 +8,7 @@ Pipeline of one batch (every step torch, differentiable end to end):
       -> standard-hand retargeting (handradar.hand.retarget; HandModelConfig.retarget)
       -> one scattering centre per bone at its midpoint, cylinder RCS (sim.scatterers)
       -> scatterer-stage effects (palm, forearm, occlusion, multipath, antenna_pattern)
-      -> per-slot range profiles at the true chirp times (sim.synthesis)     (B, 39, F, L, Ch, bins)
+      -> per-slot range profiles at the true chirp times (sim.profiles)      (B, 39, F, L, Ch, bins)
       -> weighted sum with RadarWeightNet weights (or 1)                      (B, F, L, Ch, bins)
       -> signal-stage effects (noise)
       -> handradar.radar.chain.spectrogram_from_profiles: the chain of the measured data (B, 64, 32)
@@ -26,7 +26,7 @@ Public API:
               skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5,
               rcs_exponent=1.0, compile_combine=False)
       rcs_exponent: aspect exponent of every cylinder's RCS (handradar.sim.rcs; 1 = the paper's)
-      compile_combine: torch.compile the weighted sum (see synthesis.combine_slots)
+      compile_combine: torch.compile the weighted sum (see profiles.combine_slots)
       .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
       .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
             network-independent: cache these (sim.cache) and train RadarWeightNet on them
