@@ -16,7 +16,7 @@ from typing import Any
 from handradar.data.recording import GESTURES
 
 # Bump when the physics or the kinematics change: it enters every cache key.
-WORLD_VERSION = "world/1"
+WORLD_VERSION = "world/2"
 
 # DESIGN section 5 vocabulary (the simulator's effect names) ...
 VOCABULARY = ("occlusion", "palm", "forearm", "multipath", "antenna_pattern", "noise", "sync_offset",
@@ -217,10 +217,17 @@ class Scene:
     forearm_rings: int = 3
     # another facet layout of the same surfaces: every cylinder's facets (fingers, forearm) turned about
     # its axis by this fraction of a side, the apex of the palm's triangle fan moved around a 1 cm circle.
-    # Each facet centroid is an independent scatterer, so the spectrogram's fine structure (speckle)
-    # depends on the layout; a second layout (0.5) measures how much does
+    # The returns are integrals over the smooth surfaces, so a relayout changes spectrograms by little
+    # (benchmarks/world_convergence.py measures how little)
     facet_turn: float = 0.0
     finger_radius_m: float = 0.0085  # at the MCP, for hand scale 1; tapers to 75 % at the tip
+    # physical optics: each facet is cut into flat elements over which the round-trip phase departs
+    # from linear by at most po_phase_tol_rad (surface curvature and the near field at po_ref_range_m)
+    po_phase_tol_rad: float = 0.5
+    po_ref_range_m: float = 0.2
+    skin_reflectivity: float = 0.35  # amplitude reflectivity of the coherent (mirror-like) return, normal incidence
+    # skin texture: the incoherent glossy/diffuse return, carried by points fixed on the surfaces
+    texture_per_cm2: float = 1.0
     skin_diffuse: float = 0.3  # diffuse RCS per unit area (m^2 / m^2) at normal incidence
     skin_specular: float = 1.0  # glossy lobe RCS per unit area at normal incidence
     specular_exponent: float = 8.0
