@@ -103,9 +103,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--layouts", default=",".join(LAYOUTS), help="comma-separated subset of " + ", ".join(LAYOUTS))
     ap.add_argument("--no-signatures", action="store_true", help="skip the occlusion/multipath/palm signatures")
     ap.add_argument("--figure", default=None, help="also draw the first row at every layout to this PNG")
+    ap.add_argument("--coherent-only", action="store_true",
+                    help="physical optics alone: the skin texture (incoherent glossy/diffuse return) off")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     world, radar, chain = _configs()
+    if args.coherent_only:
+        world = dataclasses.replace(world, scene=dataclasses.replace(world.scene, skin_diffuse=0.0, skin_specular=0.0))
     cap = dataclasses.replace(radar, n_frames=world.capture_frames)
     rows = specs(args.rows)
     names = [n.strip() for n in args.layouts.split(",")]
@@ -117,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
     prof = render_all([(layout(worlds[w], lname), s) for w, lname, s in jobs], radar, chain, args.workers)
     by = dict(zip(jobs, prof))
 
-    print(f"{len(rows)} rows ({', '.join(OCCLUDING)}), {len(jobs)} renders, "
+    print(f"{'physical optics only, ' if args.coherent_only else ''}{len(rows)} rows ({', '.join(OCCLUDING)}), "
+          f"{len(jobs)} renders, "
           f"{time.perf_counter() - t0:.0f} s on {args.workers} workers")
     starts = {}
     spec_of = {}
@@ -136,8 +141,8 @@ def main(argv: list[str] | None = None) -> int:
             own_oth = torch.stack([capture_spectrogram(by[wname, lname, s], cap, chain)[0] for s in rows])
             d_own = 1 - per_example_ssim(own_ref, own_oth)
             flips = sum(starts[wname, "default", s] != starts[wname, lname, s] for s in rows)
-            print(f"  {wname:11s} {lname:9s} median {np.median(d):.4f}  max {d.max():.4f}   "
-                  f"| flips {flips}/{len(rows)}, median {np.median(d_own):.4f}")
+            print(f"  {wname:11s} {lname:9s} median {np.median(d):.4f}  max {d.max():.4f} ({rows[int(d.argmax())].name})"
+                  f"  | flips {flips}/{len(rows)}, median {np.median(d_own):.4f}")
     if not args.no_signatures:
         print("\neffect signatures (with - without, effect-free world): Pearson r with the default layout's")
         for e in SIGNATURES:
@@ -146,6 +151,9 @@ def main(argv: list[str] | None = None) -> int:
             size = np.median([np.abs(x).mean() for x in sig["default"]])
             for lname in names[1:]:
                 r = np.array([pearson(a, b) for a, b in zip(sig["default"], sig[lname])])
+                if np.isnan(r).all():  # the effect changes nothing in this world (e.g. bounces without texture)
+                    print(f"  {e:10s} {lname:9s} no signature (mean |signature| {size:.4f})")
+                    continue
                 print(f"  {e:10s} {lname:9s} median r {np.nanmedian(r):.3f}  min {np.nanmin(r):.3f}   "
                       f"(mean |signature| {size:.4f})")
     if args.figure:

@@ -166,7 +166,7 @@ def _surface_integral(part: Part, scene: Scene, times: np.ndarray, n_phi: int = 
 def test_one_cylinder_returns_the_surface_integral_at_every_tessellation(tilt_deg):
     """The complex return of one finger-sized cylinder 0.3 m above the radar (near field) as it
     swings through and away from broadside, at the default 6 sides x 1 ring, turned by a quarter
-    side, and at 12 x 4 (turned or not): the brute-force integral over the smooth surface within 4 %
+    side, and at 12 x 4 (turned or not): the brute-force integral over the smooth surface within 2.5 %
     of the cylinder's broadside return, whatever the layout (tilted, where its ends dominate, too)."""
     times = np.arange(0, 0.2, 0.01)
     tilt = np.deg2rad(tilt_deg)
@@ -179,7 +179,7 @@ def test_one_cylinder_returns_the_surface_integral_at_every_tessellation(tilt_de
         got = _total([_cylinder(axis_dir, centre, times, sides, rings, turn)], COHERENT, times)
         err = np.abs(got - truth).max() / broadside
         print(f"tilt {tilt_deg:4.1f} deg, {sides} x {rings} turned {turn}: largest error {err:.4f} of broadside")
-        assert err < 0.04
+        assert err < 0.025
 
 
 def test_texture_and_burial_do_not_depend_on_the_facets():

@@ -4,55 +4,63 @@ Surfaces. Every part is a smooth surface rebuilt at each physics step (``scene.r
 bones as tapered cylinders (fingertips capped by a cone), the palm and back of the hand as a flat
 slab whose outline runs through the wrist and the knuckles, the forearm as a truncated cone from the
 wrist to an elbow fixed per recording. The scene's facets (``finger_sides`` x ``finger_rings``,
-``forearm_sides`` x ``forearm_rings``, ``palm_subdivisions``) tessellate these surfaces. They are the
-occluders of the ray caster and the renderer's tracks (one range and one complex amplitude per facet
-and chirp), not the scatterers: what scatters is the smooth surface, so where the facets lie
-(``scene.facet_turn`` lays them out differently) changes a spectrogram by little more than rounding.
+``forearm_sides`` x ``forearm_rings``, ``palm_subdivisions``) tessellate these surfaces into the
+renderer's tracks (one range and one complex amplitude per facet and chirp) and into the elements
+of the surface integral; they are not scatterers, so where the facets lie (``scene.facet_turn``
+lays them out differently) changes a spectrogram by little more than rounding
+(benchmarks/world_convergence.py).
 
-Coherent return (physical optics). Each facet is cut into flat elements whose corners lie on the
-smooth surface: a cylinder facet into strips across its curvature and segments along it, a palm
-triangle into sub-triangles, each small enough that the round-trip phase is linear across it to
-within ``scene.po_phase_tol_rad`` (the surface's curvature and the near field at
-``scene.po_ref_range_m`` both bend it). An element e contributes, in ADC counts,
+Coherent return (physical optics): the surface integral, in ADC counts,
 
-    A_e = K sqrt(4 pi) / lambda * Gamma * cos(theta_e) * G_e / R_e^2 * vis_e * I_e,
-    I_e = integral over e of exp(-2 j k (R - R_f)) dA,
+    A = K sqrt(4 pi) / lambda * Gamma * integral over the lit surface of cos(theta) G / R^2 vis exp(-2 j k R) dA,
 
-I_e in closed form from the exact ranges of its corners at every chirp (handradar.world.optics: a
-strip's sinc x sinc, a triangle's divided difference), R_f the range of its facet's track; Gamma is
-the skin's amplitude reflectivity (``scene.skin_reflectivity``: the coherent, mirror-like part of
-the skin's glossy response), theta the incidence on the element, G the antenna gain, vis its
-visibility, K the radar-equation scale below. A flat plate of area A at normal incidence in its far
-field has |sum A_e| = K sqrt(sigma) G / R^2 with sigma = 4 pi Gamma^2 A^2 / lambda^2; a facet's
-integral is the sum of its elements', so the sum converges to the smooth surface's as they shrink.
+Gamma the skin's amplitude reflectivity (``scene.skin_reflectivity``, the mirror-like part of its
+glossy response), theta the incidence, G the antenna gain, vis the shadowing, K the radar-equation
+scale below. A flat plate of area A at normal incidence in its far field has sigma = 4 pi Gamma^2
+A^2 / lambda^2, a long cylinder of radius a broadside 2 pi a L^2 Gamma^2 / lambda. Elements:
 
-Incoherent return (skin texture). Skin is rough and layered on the scale of the wavelength, and
-its glossy/diffuse response per unit area (``skin_diffuse``, ``skin_specular``,
-``specular_exponent``; zero for back-facing surface, theta from the surface normal)
+- a cylinder (or cap cone) facet is cut into strips at most 30 deg wide and, along the axis,
+  segments whose near-field phase departs from linear by at most ``scene.po_phase_tol_rad`` at
+  ``scene.po_ref_range_m``. Across a strip the integral is exact: the phase is quadratic through
+  its two sides and its centre, cos(theta) a shifted cosine of the angle around the axis, and the
+  integral over the lit part three Fresnel integrals (Strips.across, at the cast steps). Along it
+  the phase is quadratic too (the near field), integrated to first order in its small curvature
+  at every chirp (:func:`strip_along_factor`);
+- a palm facet (flat) is cut into sub-triangles of that size, each a closed form from its three
+  corners' phases (handradar.world.optics.triangle_factor).
+
+Incoherent return (skin texture). Skin is rough and layered on the scale of the wavelength; its
+glossy/diffuse response per unit area (``skin_diffuse``, ``skin_specular``, ``specular_exponent``;
+zero for back-facing surface, theta from the surface normal)
 
     sigma0(theta) = rho_d cos(theta) + rho_s cos(theta)^m
 
 is carried by texture points fixed on the smooth surfaces (``scene.texture_per_cm2`` per cm^2,
-uniform over each part's area, drawn from the recording's scene seed, independent of the
-facets), each standing for its share dA of the part's area with amplitude
-K sqrt(sigma0 dA) G / R^2 vis and a random phase of its own. Bistatic bounces use the half-vector of
-the two directions.
+uniform over each part, drawn from the recording's scene seed, independent of the facets), each
+standing for its share dA of the part's area with amplitude K sqrt(sigma0 dA) G / R^2 vis and a
+random phase of its own. Bistatic bounces use the half-vector of the two directions.
 
 The radar equation, in ADC counts: A = K sqrt(sigma) G(direction) / R^2, K = ref_counts * (0.3 m)^2 /
 sqrt(0.01 m^2); a double bounce radar -> P -> Q -> radar (Friis on each leg)
 
     A = K sqrt(sigma_P sigma_Q / (4 pi)) sqrt(G_P G_Q) / (|P| |PQ| |Q|)   at range (|P| + |PQ| + |Q|) / 2.
 
-Shadowing: a ray from the antenna to the centre of every front-facing element and texture point
-(Embree): the point is lit when no facet lies between. Double bounces: hand-table-hand (the table is
-a mirror a little below the antenna: Q is replaced by its image Q') and hand-hand, between
-``samples_per_hand`` texture points of each hand; their radar legs use the points' visibility, the
-bounce legs are not ray-cast. The strongest ``n_paths`` are kept.
+Surface inside another part's solid (a phalanx where it meets the next, the metacarpals inside the
+palm slab) is no surface: it neither scatters nor is lit, whatever the occlusion setting.
+Shadowing: a ray from the antenna to every front-facing texture point and element (three per
+cylinder strip: its centre and the middles of its ends, the strip lit in the fraction that gets
+through), Embree, against the smooth surfaces tessellated finely on their own (``occluders_of``),
+at ``scene.visibility_rate_hz``. Double bounces: hand-table-hand (the table is a mirror a little
+below the antenna: Q is replaced by its image Q') and hand-hand, between ``samples_per_hand`` lit
+texture points of each hand; their radar legs use the points' visibility, the bounce legs are not
+ray-cast. The strongest ``n_paths`` are kept.
 
-Tracks: one per facet, at the range of the facet's centre on the smooth surface, with the complex
-sum of its elements and texture points, each taken relative to that range with the wavenumber
-:func:`group_wavenumber` (the slope of the phase that the chain's range FFT sees), so a facet's
-track reproduces its elements in every range bin to first order in their spread.
+Tracks: one per facet, at the mean range of its elements, with the complex sum of its elements
+and texture points, each taken relative to that range with the wavenumber :func:`group_wavenumber`
+(the slope of the phase that the chain's range FFT sees), so a facet's track reproduces its
+elements in every range bin to first order in their spread. Weights (reflectivity, incidence,
+gain, 1/R^2, shadow) are evaluated at the cast steps, ranges and phase steps at every physics
+step; :class:`SurfaceTracks` evaluates the sums at any instant (the renderer: every chirp).
 """
 
 from __future__ import annotations
@@ -357,6 +365,31 @@ def surfaces_of(parts: list[Part]) -> Surfaces:
         slot.append(np.full(len(f), p.slot))
         n_v += v.shape[1]
     return Surfaces(np.concatenate(verts, 1), np.concatenate(faces), np.concatenate(part), np.concatenate(slot), names)
+
+
+OCCLUDER_SIDES = 24  # the ray caster's cylinders: inscribed 24-gons, within 0.9 % of the radius
+
+
+def occluders_of(parts: list[Part]) -> Surfaces:
+    """The smooth surfaces as the ray caster's triangles, at a fixed resolution of their own (every
+    cone OCCLUDER_SIDES sides, seam at phi = 0; the flat slab as its facets, exact whatever their
+    layout), so that shadows do not depend on the scene's facets."""
+    occ = []
+    for p in parts:
+        if not p.cones:
+            occ.append(p)
+            continue
+        verts, faces, n_v = [], [], 0
+        for c in p.cones:
+            phi = 2 * np.pi * np.arange(OCCLUDER_SIDES) / OCCLUDER_SIDES
+            ring = [c.surface(phi, np.full(OCCLUDER_SIDES, w), slice(None), False)[0] for w in (0.0, 1.0)]
+            verts += ring
+            i = np.arange(OCCLUDER_SIDES)
+            j = (i + 1) % OCCLUDER_SIDES
+            faces.append(np.r_[np.c_[i, j, j + OCCLUDER_SIDES], np.c_[i, j + OCCLUDER_SIDES, i + OCCLUDER_SIDES]] + n_v)
+            n_v += 2 * OCCLUDER_SIDES
+        occ.append(Part(p.name, p.slot, np.concatenate(verts, 1), np.concatenate(faces)))
+    return surfaces_of(occ)
 
 
 def build_surfaces(pose: Pose, effects: Effects, scene: Scene) -> Surfaces:
@@ -904,6 +937,23 @@ def triangle_centroid_factor(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(wide, exact, (1 - 0.5 * var).astype(np.complex64))
 
 
+def strip_along_factor(s: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """integral_{-1/2}^{1/2} exp(j (s x + q x^2)) dx to second order in the curvature q (float32):
+    sinc(s / 2) + j q M2(s) - q^2 / 2 M4(s), Mn(s) = integral x^n cos(s x) dx (series below |s| = 3).
+    The near field bends the phase along a strip by |q| / 4 <= po_phase_tol_rad; what is left out
+    is below |q|^3 / 2700."""
+    half = 0.5 * s
+    sn, cs = np.sin(half), np.cos(half)
+    big = np.abs(s) > 3
+    x = np.where(big, s, np.float32(1))
+    s2 = s * s
+    m2 = np.where(big, 2 * (sn / (4 * x) + cs / x ** 2 - 2 * sn / x ** 3),
+                  np.float32(1 / 12) - s2 / 160 + s2 * s2 / 10752)
+    m4 = np.where(big, 2 * (sn / (16 * x) + cs / (2 * x ** 2) - 3 * sn / x ** 3 - 12 * cs / x ** 4 + 24 * sn / x ** 5),
+                  np.float32(1 / 80) - s2 / 896 + s2 * s2 / 55296)
+    return (_sinc32(half) - 0.5 * q * q * m4) + 1j * (q * m2)
+
+
 def _sinc32(x: np.ndarray) -> np.ndarray:
     """sin(x) / x in float32 (1 at 0)."""
     x = np.where(x == 0, np.float32(1e-20), x)
@@ -1029,8 +1079,9 @@ class SurfaceTracks:
             rel = (_spline_eval(splines[0], self.times, ts, act) - r_f[:, fac]).astype(np.float32)  # from the facet
             phase = np.float32(-2 * k) * rel
             val = _lerp_eval(g.weights, self.weight_times, ts, act) * (np.cos(phase) + 1j * np.sin(phase))
-            if g.kind == STRIP:  # linear phase along the cylinder (the quadratic part across is in the weight)
-                val *= _sinc32(0.5 * _spline_eval(splines[1], self.times, ts, act).astype(np.float32))
+            if g.kind == STRIP:  # along the cylinder (the exact factor across it is in the weight)
+                a, b = (_spline_eval(c, self.times, ts, act).astype(np.float32) for c in splines[1:])
+                val *= strip_along_factor(a, b)
             elif g.kind == TRIANGLE:
                 a, b = (_spline_eval(c, self.times, ts, act).astype(np.float32) for c in splines[1:])
                 val *= triangle_centroid_factor(a, b)
@@ -1121,13 +1172,18 @@ def _sample_points(rng: np.random.Generator, slot: np.ndarray, lit: np.ndarray,
                    per_hand: int) -> tuple[np.ndarray, np.ndarray]:
     """Up to ``per_hand`` of each hand's texture points that are ever lit, uniformly (the points are
     uniform over the surface, so this is an area-weighted draw of its lit part); returns their
-    indices and how many candidates each one stands for."""
+    indices and how many candidates each one stands for.
+
+    Every point gets a random priority whatever its lighting and the lit ones of highest priority
+    are taken, so a point that gains or loses a sliver of light (another shadow edge) changes one
+    pick, not the whole draw."""
+    priority = rng.random(len(slot))
     idx, share = [], []
     for s in np.unique(slot):
         cand = np.flatnonzero((slot == s) & lit)
         if not cand.size:
             continue
-        pick = np.sort(rng.choice(cand, size=min(per_hand, len(cand)), replace=False))
+        pick = np.sort(cand[np.argsort(priority[cand], kind="stable")[:per_hand]])
         idx.append(pick)
         share.append(np.full(len(pick), len(cand) / len(pick)))
     if not idx:
@@ -1274,9 +1330,20 @@ def surface_tracks(parts: list[Part], surf: Surfaces, effects: Effects, scene: S
     sub = np.unique(np.r_[np.arange(0, len(cast), 2), len(cast) - 1])
     hidden = _hold(sub, buried(parts, owner, centres[sub], cast[sub]), len(cast))
     front = (cos_t > 0) & ~hidden
-    vis = cast_visibility(surf, cast, centres, front) if effects.occlusion.enabled else front.astype(float)
-    path = antenna_gain(centres, effects.antenna_pattern) / r ** 2 * vis  # (Tc, N)
     sl_s, sl_t, sl_p = slice(0, len(ks)), slice(len(ks), len(ks) + len(kt)), slice(len(ks) + len(kt), None)
+    if effects.occlusion.enabled:
+        # a strip is lit in the fraction of three rays that reach it (its centre and the middles of its
+        # two ends), so a shadow edge moves across it gradually, not strip by strip
+        ends = [np.concatenate([sp.cone.surface(*sp._at(i, 0.5, dw), cast, False)[0] for sp, i in zip(el.strips, st_idx)],
+                               1)[:, ks] if el.strips else np.zeros((len(cast), 0, 3)) for dw in (0.0, 1.0)]
+        f_s = front[:, sl_s]
+        v = cast_visibility(surf, cast, np.concatenate([centres, *ends], 1), np.concatenate([front, f_s, f_s], 1))
+        vis = v[:, :centres.shape[1]].copy()
+        n = centres.shape[1]
+        vis[:, sl_s] = (v[:, sl_s] + v[:, n:n + len(ks)] + v[:, n + len(ks):]) / 3.0
+    else:
+        vis = front.astype(float)
+    path = antenna_gain(centres, effects.antenna_pattern) / r ** 2 * vis  # (Tc, N)
     w_s = po_scale * cat1(st_area, (len(cast), 0))[:, ks] * path[:, sl_s] * across[:, ks]
     w_t = po_scale * cos_t[:, sl_t] * area_t[kt] * path[:, sl_t]
     to_radar = -centres[:, sl_p] / r[:, sl_p, None]
@@ -1285,15 +1352,12 @@ def surface_tracks(parts: list[Part], surf: Surfaces, effects: Effects, scene: S
     tex_vis = np.zeros((len(cast), len(tex.area)))
     tex_vis[:, kp] = vis[:, sl_p]
 
-    # at every physics step: a strip's phase centre is the middle of its chord along the cylinder
-    # (continuous from one segment to the next), moved towards the range of the surface at its centre
-    # by the mean of the near field's quadratic departure (2/3 of it), which the chord misses; its
-    # step is the phase difference between its two ends
+    # at every physics step: along a strip (through the middles of its ends and its centre) the phase
+    # is quadratic: its centre's range, the step between its ends and the curvature of the near field
     r0 = cat1([sp.ranges(slice(None), i, 0.5, 0.0) for sp, i in zip(el.strips, st_idx)], (len(times), 0))
     r1 = cat1([sp.ranges(slice(None), i, 0.5, 1.0) for sp, i in zip(el.strips, st_idx)], (len(times), 0))
     mid = cat1([sp.ranges(slice(None), i, 0.5, 0.5) for sp, i in zip(el.strips, st_idx)], (len(times), 0))
-    chord = 0.5 * (r0 + r1)
-    c_s, a_s = (chord + (2.0 / 3.0) * (mid - chord))[:, ks], -2 * k * (r1 - r0)[:, ks]
+    c_s, a_s, b_s = mid[:, ks], -2 * k * (r1 - r0)[:, ks], -4 * k * (r0 + r1 - 2 * mid)[:, ks]
     r_v = np.linalg.norm(el.tri_vertices, axis=-1)  # (T, V)
     rt = r_v[:, el.tris[kt]]  # (T, Et, 3)
     lin = rt.mean(-1)
@@ -1319,7 +1383,7 @@ def surface_tracks(parts: list[Part], surf: Surfaces, effects: Effects, scene: S
         return ElementGroup(kind, facet[order], centre[:, order], weight, a, b,
                             centres[:, cols][:, order].astype(np.float32))
 
-    groups = [by_facet(STRIP, np.concatenate(st_facet)[ks] if st_facet else np.zeros(0, int), sl_s, c_s, w_s, a_s),
+    groups = [by_facet(STRIP, np.concatenate(st_facet)[ks] if st_facet else np.zeros(0, int), sl_s, c_s, w_s, a_s, b_s),
               by_facet(TRIANGLE, el.tri_facet[kt], sl_t, c_t, w_t, a_t, b_t),
               by_facet(POINT, tex.facet[kp], sl_p, np.linalg.norm(tex.points[:, kp], axis=-1), w_p)]
     groups = [g for g in groups if g.facet.size]
@@ -1334,7 +1398,7 @@ def scene_tracks(pose: Pose, effects: Effects, scene: Scene, rng: np.random.Gene
                  radar: RadarConfig) -> ScatterTracks:
     """All scatterers of one recording at the pose times (physics rate)."""
     parts = build_parts(pose, effects, scene)
-    surf = surfaces_of(parts)
+    surf = occluders_of(parts)
     every = max(1, int(round(scene.rate_hz / scene.visibility_rate_hz)))
     st, tex, cast, tex_vis, labels = surface_tracks(parts, surf, effects, scene, radar, rng, pose.times, every)
     amps = st.amplitudes(pose.times)
