@@ -225,9 +225,10 @@ class Scene:
     # (benchmarks/world_convergence.py measures how little)
     facet_turn: float = 0.0
     finger_radius_m: float = 0.0085  # at the MCP, for hand scale 1; tapers to 75 % at the tip
-    # physical optics: each facet is cut into flat elements over which the round-trip phase departs
-    # from linear by at most po_phase_tol_rad (surface curvature and the near field at po_ref_range_m)
-    po_phase_tol_rad: float = 0.5
+    # physical optics: cylinder facets are cut into strips (<= 30 deg) and segments along them whose
+    # near-field phase departs from linear by at most po_phase_tol_rad at po_ref_range_m (integrated to
+    # second order in it); palm facets into flat triangles within half of it
+    po_phase_tol_rad: float = 1.0
     po_ref_range_m: float = 0.2
     skin_reflectivity: float = 0.35  # amplitude reflectivity of the coherent (mirror-like) return, normal incidence
     # skin texture: the incoherent glossy/diffuse return, carried by points fixed on the surfaces
