@@ -127,8 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     starts = {}
     spec_of = {}
     for key, p in by.items():
-        s_own, start = capture_spectrogram(p, cap, chain)
-        starts[key] = start
+        starts[key] = capture_spectrogram(p, cap, chain)[1]
     for (wname, lname, s), p in by.items():  # the effect-free world's default-layout window for every row
         spec_of[wname, lname, s] = spectrogram_at(p, cap, chain, starts[("effect-free", "default", s)])
     print("\n1 - SSIM against the default layout (common window; own windows: flips, median)")

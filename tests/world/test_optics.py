@@ -3,13 +3,16 @@ return of one surface at different tessellations (the world's layout invariance 
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from handradar.world.config import Effects, Scene
-from handradar.world.optics import parallelogram_factor, polygon_integral, rcs_of_integral, triangle_factor
+from handradar.world.optics import (
+    parallelogram_factor,
+    polygon_integral,
+    rcs_of_integral,
+    triangle_factor,
+)
 from handradar.world.scene import (
     Part,
     _palm_faces,

@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 import torch
+
 from handradar.radar.chain import ChainConfig, gate_bins, range_profiles_from_adc, range_response
 from handradar.radar.config import RadarConfig
 from handradar.world.config import Effects, IQImbalance
