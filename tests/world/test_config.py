@@ -44,3 +44,12 @@ def test_default_world_has_the_vocabulary_on_and_the_control_off():
     assert "iq_imbalance" in EFFECTS and "iq_imbalance" not in fx.enabled()
     assert fx.only("palm").enabled() == ["palm"]
     assert dataclasses.asdict(fx.with_("noise", snr_db=5.0).noise)["snr_db"] == 5.0
+
+
+def test_strong_jitter_preset_is_the_default_world_with_4_mm_jitter():
+    """conf/world/strong_jitter.yaml keeps world/1's tracking jitter as a named option; the default
+    is the Leap's reported ~1 mm."""
+    strong = world_config(_compose("world=strong_jitter").world)
+    assert WorldConfig().effects.tracking_jitter.rms_m == pytest.approx(0.001)
+    assert strong.effects.tracking_jitter.rms_m == pytest.approx(0.004)
+    assert dataclasses.replace(strong, effects=strong.effects.with_("tracking_jitter", rms_m=0.001)) == WorldConfig()

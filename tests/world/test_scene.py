@@ -70,29 +70,31 @@ def test_antenna_pattern_half_power_beamwidths():
 
 
 def test_antenna_pattern_reduces_the_return_off_boresight_as_the_pattern_says(world, radar, chain):
-    """Hand at 30 deg: every facet's amplitude is scaled by G(direction) exactly, so the received
-    power drops by about the amplitude-weighted mean of G^2 (cos(30)^(2 n_az) = -5 dB for a 64 deg beam)."""
+    """Hand at 30 deg: every surface element's and texture point's weight is scaled by G(direction)
+    exactly, so the received power drops by about the two-way gain towards the hand, G^2 at the palm
+    (cos(30)^(2 n_az) = -5 dB for a 64 deg beam; the slide sweeps it from about 10 to 50 deg)."""
     spec = RecordingSpec("slide", 0, 30.0, 0)
-    world = dataclasses.replace(world, scene=dataclasses.replace(world.scene, prune_db=400.0))  # no pruning
     w_on, w_off = with_effects(world, "antenna_pattern"), with_effects(world)
     on, off = simulate(w_on, radar, spec), simulate(w_off, radar, spec)
-    surf = build_surfaces(on.motion.pose(on.tracks.times), w_on.effects, w_on.scene)
-    c, n, _ = facet_geometry(surf.triangles)
-    ever_lit = ((n * -c).sum(-1) > 0).any(0)  # facets never facing the radar carry nothing and are dropped
-    gain = antenna_gain(c, w_on.effects.antenna_pattern)[:, ever_lit]
-    a_on, a_off = on.tracks.amplitudes, off.tracks.amplitudes
-    assert a_on.shape == a_off.shape == gain.shape
-    lit = a_off > 0
-    assert lit.mean() > 0.2
-    assert np.allclose(a_on[lit] / a_off[lit], gain[lit], rtol=1e-9)
-    expected_db = 10 * np.log10((a_off ** 2 * gain ** 2).sum() / (a_off ** 2).sum())
+    for g_on, g_off in zip(on.tracks.surface.groups, off.tracks.surface.groups):
+        assert g_on.kind == g_off.kind and g_on.weights.shape == g_off.weights.shape
+        gain = antenna_gain(g_on.centres.astype(float), w_on.effects.antenna_pattern)
+        lit = g_off.weights != 0
+        assert lit.mean() > 0.2
+        assert np.allclose(g_on.weights[lit] / g_off.weights[lit], gain[lit], rtol=1e-5)
+    # each instant's return scaled by the two-way gain towards the palm then, weighted by that return
+    palm = on.motion.pose(on.tracks.times).palm_centres()[:, on.motion.slots[0]]
+    g2 = antenna_gain(palm, w_on.effects.antenna_pattern) ** 2
+    power = (np.abs(off.tracks.amplitudes) ** 2).sum(1)
+    expected_db = 10 * np.log10((power * g2).sum() / power.sum())
     assert -8.0 < expected_db < -3.0
     _, p_on = profiles(w_on, radar, chain, spec)
     _, p_off = profiles(w_off, radar, chain, spec)
     measured_db = 10 * np.log10(float(p_on.abs().pow(2).sum() / p_off.abs().pow(2).sum()))
-    # the facets add coherently, so the received power follows the incoherent prediction only
-    # roughly (measured within 1.5 dB on several gestures)
-    assert measured_db == pytest.approx(expected_db, abs=2.0)
+    # the hand spans about +-10 deg around that direction and its surface adds coherently, so the
+    # received power follows the gain at the palm only roughly
+    print(f"antenna pattern: expected {expected_db:.2f} dB, measured {measured_db:.2f} dB")
+    assert measured_db == pytest.approx(expected_db, abs=1.5)
     assert measured_db < -2.5
 
 
@@ -125,7 +127,8 @@ def test_shadowing_removes_the_return_of_the_hand_hidden_behind_the_other(world,
         tr = sim.tracks
         end = tr.times > sim.motion.start_s + 0.8 * sim.motion.duration_s
         label = tr.label.astype(str)
-        energy[name] = [float((tr.amplitudes[end][:, np.char.startswith(label, f"{s}:")] ** 2).sum()) for s in (0, 1)]
+        energy[name] = [float((np.abs(tr.amplitudes[end][:, np.char.startswith(label, f"{s}:")]) ** 2).sum())
+                        for s in (0, 1)]
     upper = energy["on"][0] / energy["off"][0]
     lower = energy["on"][1] / energy["off"][1]
     assert upper < 0.2 < 0.5 < lower
@@ -135,6 +138,7 @@ def test_multipath_adds_a_return_at_the_image_range(world, radar, chain):
     """Hand-table-hand: the palm's bounce off the table comes back at R + (height above the table)."""
     wide = dataclasses.replace(chain, gate_m=(0.05, 1.0), clutter_removal=False)
     spec = RecordingSpec("grasp", 0, 0.0, 0)
+    world = dataclasses.replace(world, scene=dataclasses.replace(world.scene, prune_db=400.0))  # no pruning
     w_on = with_effects(world, "multipath", "palm")
     on, p_on = profiles(w_on, radar, wide, spec)
     _, p_off = profiles(with_effects(world, "palm"), radar, wide, spec)

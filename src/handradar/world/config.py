@@ -17,7 +17,7 @@ from handradar.vocab import EFFECTS as SIMULATED_EFFECTS
 from handradar.vocab import GESTURES, WORLD_ONLY_EFFECTS
 
 # Bump when the physics or the kinematics change: it enters every cache key.
-WORLD_VERSION = "world/1"
+WORLD_VERSION = "world/2"
 
 # Every effect the world can switch: the simulator's vocabulary and the world-only ones (handradar.vocab).
 EFFECTS = SIMULATED_EFFECTS + WORLD_ONLY_EFFECTS
@@ -98,10 +98,14 @@ class SyncOffset:
 
 @dataclass(frozen=True)
 class TrackingJitter:
-    """Leap joint jitter: 3-D rms per joint (metres), first-order correlated over ``corr_time_s``."""
+    """Leap joint jitter: 3-D rms per joint (metres), first-order correlated over ``corr_time_s``.
+
+    1 mm: the Leap Motion's dynamic position error (Weichert et al., Sensors 2013: 1.2 mm dynamic,
+    below 0.2 mm static; Guna et al., Sensors 2014: below 0.5 mm static). The former default of
+    4 mm is kept as the preset ``world=strong_jitter`` (conf/world/strong_jitter.yaml)."""
 
     enabled: bool = True
-    rms_m: float = 0.004
+    rms_m: float = 0.001
     corr_time_s: float = 0.02
 
 
@@ -214,10 +218,18 @@ class Scene:
     forearm_rings: int = 3
     # another facet layout of the same surfaces: every cylinder's facets (fingers, forearm) turned about
     # its axis by this fraction of a side, the apex of the palm's triangle fan moved around a 1 cm circle.
-    # Each facet centroid is an independent scatterer, so the spectrogram's fine structure (speckle)
-    # depends on the layout; a second layout (0.5) measures how much does
+    # The returns are integrals over the smooth surfaces, so a relayout changes spectrograms by little
+    # (benchmarks/world_convergence.py measures how little)
     facet_turn: float = 0.0
     finger_radius_m: float = 0.0085  # at the MCP, for hand scale 1; tapers to 75 % at the tip
+    # physical optics: cylinder facets are cut into strips (<= 30 deg) and segments along them whose
+    # near-field phase departs from linear by at most po_phase_tol_rad at po_ref_range_m (integrated to
+    # second order in it); palm facets into flat triangles within half of it
+    po_phase_tol_rad: float = 1.0
+    po_ref_range_m: float = 0.2
+    skin_reflectivity: float = 0.35  # amplitude reflectivity of the coherent (mirror-like) return, normal incidence
+    # skin texture: the incoherent glossy/diffuse return, carried by points fixed on the surfaces
+    texture_per_cm2: float = 1.0
     skin_diffuse: float = 0.3  # diffuse RCS per unit area (m^2 / m^2) at normal incidence
     skin_specular: float = 1.0  # glossy lobe RCS per unit area at normal incidence
     specular_exponent: float = 8.0

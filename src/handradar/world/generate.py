@@ -101,7 +101,7 @@ def simulate(world: WorldConfig, radar: RadarConfig, spec: RecordingSpec) -> Sim
                     forearm_m=world.effects.forearm.length_m)
     dt = 1.0 / world.scene.rate_hz
     times = np.arange(-2 * dt, capture_s + 2.5 * dt, dt)
-    tracks = scene_tracks(motion.pose(times), world.effects, world.scene, np.random.default_rng(scene_ss))
+    tracks = scene_tracks(motion.pose(times), world.effects, world.scene, np.random.default_rng(scene_ss), cap)
     fx = world.effects
     sigma = noise_sigma(tracks, cap, fx.noise.snr_db) if fx.noise.enabled else 0.0
     leap = observe(motion, capture_s, world.leap, fx, np.random.default_rng(leap_ss))
@@ -125,7 +125,9 @@ def simulate(world: WorldConfig, radar: RadarConfig, spec: RecordingSpec) -> Sim
         "amplitude": motion.amplitude,
         "centre_m": motion.centre.tolist(),
         "hand_slots": motion.slots,
-        "n_scatterers": int(tracks.kind.size),
+        "n_scatterers": int(tracks.kind.size),  # tracks: facets, bounce paths, static reflectors
+        "n_surface_elements": 0 if tracks.surface is None else int(tracks.surface.n_elements),
+        "n_texture_points": 0 if tracks.surface is None else int(tracks.surface.n_points),
     }
     rngs = [np.random.default_rng(s) for s in (noise_ss, quant_ss)]
     return Simulated(spec, cap, motion, tracks, sigma, leap, meta, truth, *rngs)

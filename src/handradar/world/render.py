@@ -10,8 +10,10 @@ Two routes with the same physics (docs/architecture.md, "Processing chain and si
   and int16 rounding is replaced by its equivalent, white noise of 1/12 count^2 per I and Q.
 
 Motion: scatterer ranges are interpolated from the physics rate to each chirp's sampling time
-(RadarConfig.chirp_times_s, idle gaps between frames included) with a cubic spline, amplitudes
-(which carry the shadowing) linearly.
+(RadarConfig.chirp_times_s, idle gaps between frames included) with a cubic spline, point
+amplitudes (which carry the shadowing) linearly; a facet track's complex amplitude is evaluated at
+each chirp from its physical-optics elements and texture points (scene.SurfaceTracks), whose
+relative phases change much faster than the physics rate.
 """
 
 from __future__ import annotations
@@ -20,7 +22,6 @@ import math
 
 import numpy as np
 import torch
-from scipy.interpolate import CubicSpline
 
 from handradar.radar.chain import (
     ChainConfig,
@@ -38,19 +39,9 @@ _TABLE_STEPS_PER_BIN = 64
 
 
 def interpolate_tracks(tracks: ScatterTracks, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges (cubic spline) and amplitudes (linear) at ``times`` (any shape) -> (*times.shape, K)."""
-    t = np.asarray(times, dtype=np.float64)
-    flat = t.reshape(-1)
-    if flat.min() < tracks.times[0] - 1e-9 or flat.max() > tracks.times[-1] + 1e-9:
-        raise ValueError(f"times {flat.min():.4f}..{flat.max():.4f} s outside the tracks "
-                         f"{tracks.times[0]:.4f}..{tracks.times[-1]:.4f} s")
-    ranges = CubicSpline(tracks.times, tracks.ranges, axis=0)(flat)
-    hi = np.clip(np.searchsorted(tracks.times, flat, side="right"), 1, len(tracks.times) - 1)
-    lo = hi - 1
-    frac = ((flat - tracks.times[lo]) / (tracks.times[hi] - tracks.times[lo]))[:, None]
-    amps = tracks.amplitudes[lo] * (1 - frac) + tracks.amplitudes[hi] * frac
-    shape = t.shape + (tracks.ranges.shape[1],)
-    return ranges.reshape(shape), amps.reshape(shape)
+    """Ranges (cubic spline) and complex amplitudes at ``times`` (any shape) -> (*times.shape, K):
+    facet tracks evaluated from their surface elements, point scatterers interpolated linearly."""
+    return tracks.at(times)
 
 
 def carrier(radar: RadarConfig, ranges_m: np.ndarray, amps: np.ndarray) -> np.ndarray:
@@ -58,22 +49,30 @@ def carrier(radar: RadarConfig, ranges_m: np.ndarray, amps: np.ndarray) -> np.nd
     return amps * np.exp(-4j * np.pi * ranges_m / radar.wavelength_m)
 
 
+def _powers(step: torch.Tensor, n: int) -> torch.Tensor:
+    """step^0 .. step^(n-1) along a new last axis (complex64), by a running product (n is small:
+    the rounding error grows like n eps)."""
+    out = step.unsqueeze(-1).expand(*step.shape, n).clone()
+    out[..., 0] = 1.0
+    return torch.cumprod(out, dim=-1)
+
+
 def synthesize_beat(radar: RadarConfig, ranges_m: np.ndarray, amps: np.ndarray) -> np.ndarray:
     """Beat signal sum_k A_k exp(j 2 pi f_b,k n / fs) exp(-j 4 pi R_k / lambda) (signal.beat_signal's model).
 
     ranges_m, amps: (C, K) at C chirps -> (C, n_samples) complex64. Written as a batched matrix
-    product: with n = B m + r, exp(j 2 pi nu n) = exp(j 2 pi nu r) exp(j 2 pi nu B m).
+    product: with n = B m + r, exp(j 2 pi nu n) = exp(j 2 pi nu r) exp(j 2 pi nu B m), each factor
+    a power series of one phasor.
     """
     n = radar.n_samples
     block = _BLOCK if n % _BLOCK == 0 else 1
     nu = torch.as_tensor(radar.beat_frequency_hz(ranges_m) / radar.sample_rate_hz, dtype=torch.float64)
-    car = torch.as_tensor(carrier(radar, ranges_m, amps))
-    r = torch.arange(block, dtype=torch.float64)
-    m = torch.arange(n // block, dtype=torch.float64) * block
-    ph_r = 2 * math.pi * nu[..., None] * r
-    ph_m = 2 * math.pi * nu[..., None] * m
-    a = (car[..., None] * torch.polar(torch.ones_like(ph_r), ph_r)).to(torch.complex64)  # (C, K, B)
-    b = torch.polar(torch.ones_like(ph_m), ph_m).to(torch.complex64)  # (C, K, M)
+    car = torch.as_tensor(carrier(radar, ranges_m, amps)).to(torch.complex64)
+    ones = torch.ones_like(nu)
+    step_r = torch.polar(ones, 2 * math.pi * nu).to(torch.complex64)
+    step_m = torch.polar(ones, 2 * math.pi * nu * block).to(torch.complex64)
+    a = car[..., None] * _powers(step_r, block)  # (C, K, B)
+    b = _powers(step_m, n // block)  # (C, K, M)
     out = torch.bmm(b.transpose(-1, -2), a)  # (C, M, B): sample B m + r
     return out.reshape(*ranges_m.shape[:-1], n).numpy()
 
