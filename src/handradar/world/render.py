@@ -26,7 +26,6 @@ import torch
 from handradar.radar.chain import (
     ChainConfig,
     gate_bins,
-    range_profiles_from_adc,
     range_response,
     window,
 )
@@ -180,8 +179,3 @@ def _bin_fft(x: torch.Tensor, chain: ChainConfig, bins: np.ndarray) -> torch.Ten
 
     w = window(chain.range_window, x.shape[-1], dtype=torch.float32)
     return torch.fft.fft(x * w, dim=-1)[..., torch.as_tensor(bins)]
-
-
-def profiles_from_adc(adc: np.ndarray, radar: RadarConfig, chain: ChainConfig) -> torch.Tensor:
-    """The chain's measured entry, for comparisons with the fast path."""
-    return range_profiles_from_adc(torch.as_tensor(adc), radar, chain)
