@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,10 @@ from omegaconf import DictConfig, OmegaConf
 from handradar.runs.mlflow import Tracker
 
 log = logging.getLogger(__name__)
+
+# Lightning 2.x calls a torch pytree API that torch 2.14 deprecates, once per batch: a wall of
+# identical lines in every job's log that says nothing about the job (tests silence it likewise).
+warnings.filterwarnings("ignore", message=r"`isinstance\(treespec, LeafSpec\)` is deprecated", category=FutureWarning)
 
 
 class StepSeed(Callback):

@@ -19,6 +19,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+import pydantic_core
 
 from handradar.atomic import atomic_write_text
 from handradar.errors import FormatError
@@ -208,6 +209,16 @@ def leap_matrix(value: object, source: str | Path) -> np.ndarray:
     return m
 
 
+def _loads(raw: bytes, line: str) -> object:
+    """One JSON line: pydantic-core's parser (about twice as fast as the standard library's, the
+    largest cost of reading a Leap file); anything it refuses goes through ``json.loads``, which
+    either accepts it as well or raises the error reported to the user (with its column)."""
+    try:
+        return pydantic_core.from_json(raw)
+    except ValueError:
+        return json.loads(line)
+
+
 def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_start_us: float) -> HandSequence:
     """Read ``leap.jsonl`` into a radar-frame HandSequence; time 0 is the start of radar frame 0."""
     path = Path(path)
@@ -231,7 +242,7 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
                 if not line.strip():
                     continue
                 try:
-                    obj = json.loads(line)
+                    obj = _loads(raw, line)
                 except json.JSONDecodeError as exc:
                     raise FormatError(path, f"invalid JSON ({exc.msg} at column {exc.colno})", line=lineno) from None
                 except ValueError as exc:  # e.g. an integer literal beyond Python's 4300-digit conversion limit
