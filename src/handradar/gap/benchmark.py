@@ -163,10 +163,10 @@ def layout_oracle(case_path: str | Path, clean_turned: str | Path, case_turned: 
     same worlds with their facets laid out differently (``scene.facet_turn``), before = without the
     effect, after = with exactly the withheld effect and its true parameters.
 
-    Every facet centroid of the world is an independent scatterer, so part of a spectrogram is speckle
-    that depends on where the facets lie; an effect whose radar signature is mostly such speckle
-    closes nothing here, and no simulator that lacks the world's facet layout can be credited with it.
-    Truth-side context, never seen by the diagnosis.
+    The world's surface returns converge with the tessellation (world/2), so this is the upper
+    reference of a candidate: what the world's exact physics of the effect closes when nothing but
+    the facet layout differs. An effect that closes nothing here cannot be credited to any
+    simulator. Truth-side context, never seen by the diagnosis.
     """
 
     measured, before, after = _paired(case_path, clean_turned, case_turned)
@@ -205,11 +205,11 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "(mean / median): how visible the withheld effect is in the radar data at all. `world at another facet "
              "layout` is the gap_closed [95 % CI] of the world's own physics used as the simulator: the same worlds "
-             "with their facets laid out differently (cylinders turned by half a side, the palm's fan apex moved), "
+             "with their facets laid out differently (`benchmark.layout_turn` of a side; the palm's fan apex moved), "
              "without and with exactly the withheld effect "
-             "(handradar.gap.benchmark.layout_oracle; - where the effect leaves the radar data unchanged). Near or "
-             "below 0, the effect's signature is facet speckle that no simulator without the world's facet layout "
-             "can reproduce.", "",
+             "(handradar.gap.benchmark.layout_oracle; - where the effect leaves the radar data unchanged): the "
+             "most a simulator of that effect can close. Near or below 0, the effect leaves nothing a simulator "
+             "could be credited with.", "",
              "| world | truth | attributed cause | correct | gap_closed of the true effect [95 % CI] | rank | "
              "top candidate (gap_closed) | runner-up lead CI | after: effects (gap_closed) | baseline SSIM | "
              "radar signature | world at another facet layout |",
