@@ -11,6 +11,9 @@ numbers and the files. The withheld-effect benchmark (handradar.gap.benchmark, i
 Public API:
 
     run(cfg) -> Path                       the report's path
+    fit_simulator(data, sim_settings, diagnose_settings, *, cache_dir=None, effects=True,
+                  progress=False) -> (Diagnosis, fitted sim settings)
+                                           the one fitting path (diagnose.py and train.py's synth.fit_sim)
     write_outputs(diagnosis, out_dir, radar, chain, source="") -> {"json", "md", figures...}
 """
 
@@ -25,7 +28,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_write_text
 from handradar.data.datasets import file_hash
-from handradar.gap.data import load_dataset
+from handradar.gap.data import GapData, load_dataset
 from handradar.gap.diagnosis import Diagnosis, diagnose
 from handradar.gap.markdown import render
 from handradar.gap.report import fitted_simulator, write_report
@@ -60,6 +63,23 @@ def write_outputs(diagnosis: Diagnosis, out_dir: str | Path, radar: RadarConfig,
     return paths
 
 
+def fit_simulator(data: GapData, sim_settings: Mapping, diagnose_settings: Mapping | None = None, *,
+                  cache_dir: str | Path | None = None, effects: bool = True,
+                  progress: bool = False) -> tuple[Diagnosis, dict]:
+    """Diagnose ``data`` with the simulator of ``sim_settings`` as the baseline and return the report
+    with the fitted simulator's ``sim`` settings (:func:`handradar.gap.report.fitted_simulator`).
+
+    effects=False: step 0 only (the calibrated baseline, no candidate is fitted or kept). Nothing is
+    taken from the data's origin: every value comes from the rows of ``data``.
+    """
+    settings = dict(diagnose_settings or {})
+    if not effects:
+        settings["candidates"] = []
+    build = SimFactory.from_config(sim_settings, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
+    diag = diagnose(data, build, build.effects, settings, cache_dir=cache_dir, progress=progress)
+    return diag, fitted_simulator(diag.report, sim_settings)
+
+
 def headline_metrics(report: dict) -> dict[str, float]:
     """Numbers of a report for MLflow (``gap/...``)."""
     m = {"gap/baseline_ssim": report["baseline"]["ssim"], "gap/baseline_mse": report["baseline"]["mse"],
@@ -82,7 +102,7 @@ def run(cfg: DictConfig) -> Path:
     path = instantiate(cfg.data.dataset).path()
     data = load_dataset(path)
     radar, chain = data.radar, data.chain  # simulate with the data's own radar and chain
-    build = SimFactory.from_config(cfg.sim, radar, chain, skeleton_rate_hz=data.skeleton_rate_hz)
+    sim_settings = OmegaConf.to_container(cfg.sim, resolve=True)
     out = output_dir()
     tags = {"preset": cfg.task_name, "seed": cfg.diagnose.seed, "data_path": path, "data_hash": file_hash(path),
             "code_version": code_version(), "run_dir": out}
@@ -90,9 +110,9 @@ def run(cfg: DictConfig) -> Path:
     ref = DataRef.of(OmegaConf.to_container(cfg.data, resolve=True), path, tags["data_hash"])
     with tracked_run(tracker, run_name=ref.run_name(cfg.task_name, cfg.diagnose.seed), tags=tags,
                      config=OmegaConf.to_container(cfg, resolve=True), dataset=ref):
-        diag = diagnose(data, build, build.effects, OmegaConf.to_container(cfg.diagnose, resolve=True),
-                        cache_dir=Path(cfg.paths.cache_dir) / "gap", progress=bool(cfg.get("progress", True)))
-        paths = write_outputs(diag, out, radar, chain, str(path), OmegaConf.to_container(cfg.sim, resolve=True))
+        diag, _ = fit_simulator(data, sim_settings, OmegaConf.to_container(cfg.diagnose, resolve=True),
+                                cache_dir=Path(cfg.paths.cache_dir) / "gap", progress=bool(cfg.get("progress", True)))
+        paths = write_outputs(diag, out, radar, chain, str(path), sim_settings)
         tracker.log_metrics(headline_metrics(diag.report))
         tracker.set_tags({f"{TAG_PREFIX}cause": diag.report["cause"]})
         for name, p in paths.items():

@@ -76,10 +76,13 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
     for key in ("candidates", "signatures"):
         if key in rel:
             lines += [f"![{key}]({rel[key]})", ""]
-    lines += ["## How far", "", "Greedy forward selection (each step refits the remaining significant candidates on "
-              "calibration given those chosen; gap_closed of the remaining gap):", ""]
+    lines += ["## How far", "", "Greedy forward selection (each step refits every remaining candidate on "
+              "calibration given those chosen; gap_closed of the remaining gap; then each chosen effect is "
+              "refitted given the others):", ""]
     for step in report.get("selection", []):
         items = ", ".join(f"{c['effect']} {fmt_number(c['gap_closed_of_remaining'], signed=True)}" for c in step["candidates"])
+        if not step["candidates"] and step.get("params"):
+            items = "; ".join(f"{k} {v}" for k, v in step["params"].items())
         lines.append(f"- step {step['step']} (base: {', '.join(step['base']) or 'baseline'}): {items or '-'}")
     lines += ["", f"After: effects {after['effects'] or '[]'}, SSIM {fmt_number(after['ssim'])}, MSE {fmt_number(after['mse'], 5)}, "
               f"gap closed {fmt_number(after['gap_closed'], signed=True)}.", ""]

@@ -19,12 +19,15 @@ Synthetic spectrograms enter train.py jobs through two Hydra-instantiated callab
 (``synth.provider`` and ``synth.external_provider``, both ``_partial_: true``):
 
 ``provider(real_path: Path, rows: np.ndarray, mode: Literal["model", "enhanced"], *, fit_rows: np.ndarray,
-seed: int, cache_dir: Path) -> Path``
+seed: int, cache_dir: Path[, sim: Mapping]) -> Path``
     One synthetic spectrogram per requested row of the real dataset ``real_path``, simulated from
     that row's skeleton, written as a ``handradar.dataset/1`` file whose rows follow ``rows`` (same
     labels and meta order). ``mode="model"``: the modelling-only simulator; ``mode="enhanced"``:
     simulator + RadarWeightNet, which the provider may fit on the radar data of ``fit_rows`` only
     (the few-shot real rows; never the test rows). ``cache_dir`` is the provider's to cache in.
+    ``sim`` (passed only when train.py fits the simulator or draws nuisance parameters,
+    ``synth.fit_sim`` / ``synth.randomize``): the ``sim`` settings to simulate with instead of the
+    provider's own.
 
 ``external_provider(source_cfg, *, seed: int, cache_dir: Path) -> Path``
     Spectrograms synthesised from an external skeleton dataset (``source_cfg`` is the

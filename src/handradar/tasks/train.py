@@ -56,10 +56,13 @@ from handradar.data.datasets import (
 )
 from handradar.data.hdf5 import read_attrs
 from handradar.data.splits import Split, few_shot_split, make_split
+from handradar.gap.data import load_dataset
+from handradar.gap.job import fit_simulator
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import code_version, config_hash
 from handradar.runs.mlflow import DataRef, Tracker, flatten, tracked_run
 from handradar.runs.tables import job_table
+from handradar.sim.effects import REGISTRY
 from handradar.synthesis.providers import load_synthetic
 from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_stats
 from handradar.tasks.gan import CGANModule, sample_per_class
@@ -105,6 +108,29 @@ def weights_hash(net: torch.nn.Module) -> str:
         h.update(k.encode())
         h.update(v.detach().cpu().contiguous().numpy().tobytes())
     return h.hexdigest()[:16]
+
+
+def nuisance_draw(sim: dict, spread: dict, rng: np.random.Generator) -> dict:
+    """``sim`` settings with each parameter named in ``spread`` (``{rcs_exponent: sd, effect: {param: sd}}``,
+    sd in the parameter's unit) drawn from a normal around its value, clipped to its bounds.
+    Parameters of effects the simulator lacks are left alone."""
+    out = json.loads(json.dumps(sim))  # a deep copy of plain settings
+    params = out.setdefault("effect_params", {})
+    flat = {f"{k}.{p}" if isinstance(v, dict) else k: sd for k, v in spread.items()
+            for p, sd in (v.items() if isinstance(v, dict) else [(None, v)])}
+    for name, sd in sorted(flat.items()):
+        if name == "rcs_exponent":
+            out[name] = float(np.clip(out.get(name, 1.0) + float(sd) * rng.standard_normal(), 0.0, 1.0))
+            continue
+        effect, _, key = name.partition(".")
+        if effect not in REGISTRY or key not in REGISTRY[effect].params:
+            raise ValueError(f"synth.randomize: {name!r} is not rcs_exponent or an effect's parameter")
+        if effect not in (out.get("effects") or []):
+            continue
+        spec = REGISTRY[effect].params[key]
+        value = float((params.get(effect) or {}).get(key, spec.default))
+        params.setdefault(effect, {})[key] = float(np.clip(value + float(sd) * rng.standard_normal(), spec.low, spec.high))
+    return out
 
 
 def _rows(part: FileRows | ArrayRows) -> int:
@@ -302,13 +328,60 @@ class Job:
             return []
         if adds in ("model", "enhanced"):
             provider = instantiate(self.cfg.synth.provider)
-            path = provider(real.path, split.pool, adds, fit_rows=split.train, seed=self.seed,
-                            cache_dir=Path(self.cfg.synth.cache_dir))
-            load_synthetic(path, real.y[split.pool], real.x.shape[1:])  # checks the provider's contract
-            return [FileRows(Path(path))]
+            sims = self.synthesis_sims(split)
+            parts = []
+            for draw, sim in enumerate(sims):
+                kw = {} if sim is None else {"sim": sim}  # None: the provider's own (the `sim` config)
+                path = provider(real.path, split.pool, adds, fit_rows=split.train, seed=self.seed + 1000 * draw,
+                                cache_dir=Path(self.cfg.synth.cache_dir), **kw)
+                load_synthetic(path, real.y[split.pool], real.x.shape[1:])  # checks the provider's contract
+                parts.append(FileRows(Path(path)))
+            return parts
         if adds == "cgan":
             return [ArrayRows(*self.cgan_samples(split))]
         raise ValueError(f"unknown addition {adds!r}")
+
+    def fitted_sim(self, split: Split) -> dict | None:
+        """The ``sim`` settings fitted on the real training rows (``synth.fit_sim``; None: ``sim`` as
+        configured), through the diagnosis's fitting path; cached in the job's state, logged to MLflow."""
+        mode = str(self.cfg.synth.get("fit_sim", "none"))
+        if mode not in ("none", "calibrate", "effects"):
+            raise ValueError(f"synth.fit_sim must be none, calibrate or effects, found {mode!r}")
+        if mode == "none":
+            return None
+        f = self.state / "fitted_sim.yaml"
+        if f.is_file():
+            return OmegaConf.to_container(OmegaConf.load(f), resolve=True)
+        log.info("fitting the simulator (%s) on %d real training rows", mode, len(split.train))
+        data = load_dataset(self.real.path).take(split.train)
+        fit = self.cfg.synth.get("fit")
+        fit_cfg = {"seed": self.seed, **(OmegaConf.to_container(fit, resolve=True) if fit else {})}
+        diag, settings = fit_simulator(data, OmegaConf.to_container(self.cfg.sim, resolve=True), fit_cfg,
+                                       cache_dir=Path(self.cfg.synth.cache_dir) / "fit", effects=mode == "effects")
+        if self.rank_zero:
+            atomic_write_text(self.state / "fit_report.json", json.dumps(diag.report, indent=1))
+            atomic_write_text(f, OmegaConf.to_yaml(settings))
+            self.tracker.log_artifact(f, "synthesis")
+            self.tracker.log_artifact(self.state / "fit_report.json", "synthesis")
+            self.tracker.log_params({"synth.fitted.effects": ",".join(settings["effects"]) or "-",
+                                     "synth.fitted.rcs_exponent": settings.get("rcs_exponent", 1.0)})
+        return settings
+
+    def synthesis_sims(self, split: Split) -> list[dict | None]:
+        """One ``sim`` setting per synthetic sample of a pool row (``synth.samples_per_row``): the fitted
+        simulator, with the nuisance parameters of ``synth.randomize`` drawn around their fitted values."""
+        cfg = self.cfg.synth
+        fitted = self.fitted_sim(split)
+        k = int(cfg.get("samples_per_row", 1))
+        spread = OmegaConf.to_container(cfg.randomize, resolve=True) if cfg.get("randomize") else {}
+        if k < 1:
+            raise ValueError(f"synth.samples_per_row must be >= 1, found {k}")
+        if not spread:
+            if k > 1:
+                raise ValueError("synth.samples_per_row > 1 needs synth.randomize (identical draws add nothing)")
+            return [fitted]
+        base = fitted if fitted is not None else OmegaConf.to_container(self.cfg.sim, resolve=True)
+        return [nuisance_draw(base, spread, np.random.default_rng([self.seed, j])) for j in range(k)]
 
     def cgan_samples(self, split: Split) -> tuple[np.ndarray, np.ndarray]:
         """CGAN trained on the real training rows; samples per class as many as the pool's rows
