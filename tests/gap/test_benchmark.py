@@ -14,6 +14,7 @@ from handradar.gap.benchmark import (
     case_world,
     cases,
     layout_oracle,
+    results_markdown,
     run_benchmark,
     score,
     turned,
@@ -49,6 +50,26 @@ def test_score_counts_effects_and_controls():
     assert abs(s["mean_true_gap_closed"] - 0.2) < 1e-12
     m = np.asarray(s["matrix"])
     assert m.sum() == 3 and m[0, s["labels"].index("palm")] == 1 and m[1, s["labels"].index("none")] == 1
+
+
+def test_inconclusive_is_wrong_for_effects_and_controls_and_shows_its_estimate():
+    res = [{"case": "palm", "truth": "palm", "cause": "inconclusive", "correct": False, "recordings_needed": 620},
+           {"case": "noise", "truth": "noise", "cause": "noise", "correct": True, "recordings_needed": None},
+           {"case": "nothing", "truth": "none", "cause": "inconclusive", "correct": False, "recordings_needed": None},
+           {"case": "iq_imbalance", "truth": "none", "cause": "none", "correct": True, "recordings_needed": None}]
+    for r in res:
+        r.update(true_gap_closed=None if r["truth"] == "none" else 0.03, after_gap_closed=0.0, true_ci95=[0.0, 0.06],
+                 true_rank=1, top_candidate="palm", top_gap_closed=0.03, lead_ci95=None, after_effects=[],
+                 baseline_ssim=0.9)
+    s = score(res)
+    assert (s["effects_correct"], s["controls_correct"]) == (1, 1)
+    assert (s["effects_inconclusive"], s["controls_inconclusive"]) == (1, 1)
+    m = np.asarray(s["matrix"])
+    assert m[0, s["labels"].index("inconclusive")] == 1 and m[2, s["labels"].index("inconclusive")] == 1
+    md = results_markdown(res, s, "gap_confusion.png", {})
+    assert "| palm | palm | inconclusive (~620 recordings) | no |" in md
+    assert "| nothing | none | inconclusive (no estimate) | no |" in md
+    assert "controls: 1 of 2 say none; inconclusive: 1 of 2 withheld effects, 1 of 2 controls." in md
 
 
 def _spectrogram_file(path, spec):

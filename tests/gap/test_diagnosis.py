@@ -1,5 +1,6 @@
-"""The diagnosis names an effect that is there, recovers its parameter roughly, and says "none" when
-no candidate explains the gap; its report follows the contract."""
+"""The diagnosis names an effect that is there, recovers its parameter roughly, says "none" when no
+candidate can explain a relevant part of the gap and "inconclusive" (with the recordings that would
+decide it) when the data cannot tell; its report follows the contract."""
 
 from __future__ import annotations
 
@@ -8,8 +9,16 @@ import pytest
 import torch
 
 from handradar.gap.data import GapData
-from handradar.gap.diagnosis import Candidate, DiagnosisConfig, _evidence, diagnose
+from handradar.gap.diagnosis import (
+    Candidate,
+    DiagnosisConfig,
+    _evidence,
+    decide,
+    diagnose,
+    rows_to_decide,
+)
 from handradar.gap.fit import GridFit, effect_grid
+from handradar.gap.markdown import render
 from handradar.gap.report import validate_report
 from handradar.sim.effects import REGISTRY, Effect
 from handradar.sim.effects.base import Param
@@ -49,14 +58,24 @@ def test_null_data_give_none(radar, short_chain):
     assert all(c["gap_closed"] <= 1e-6 for c in rep["candidates"])
 
 
-def test_gap_outside_the_vocabulary_gives_none(radar, short_chain):
+def test_gap_outside_the_vocabulary_names_no_effect(radar, short_chain, tmp_path):
     # a receiver IQ imbalance (mirror image at the opposite Doppler): no candidate effect makes it
     # 24 rows: a percentile bootstrap over a handful of evaluation rows is too narrow to trust
     data = gap_data(radar, short_chain, 24, {}, seed=2, distort=lambda s: s + 0.3 * s.conj())
     rep = run(radar, short_chain, data).report
     assert rep["baseline"]["ssim"] < 0.99  # there is a gap ...
-    assert rep["cause"] == "none"  # ... that nothing in the vocabulary explains
-    assert not any(c["significant"] for c in rep["candidates"])
+    assert not any(c["significant"] for c in rep["candidates"])  # ... that nothing in the vocabulary explains
+    # "inconclusive", not "none", is the right verdict on 12 evaluation rows: the leader (noise, the
+    # generic floor gain of about +0.006) has a CI [-0.012, +0.021] that still reaches past
+    # min_gap_closed = 0.02, so the data cannot yet show that no candidate is relevant; what would
+    # show it is the upper bound falling below 0.02, for which more rows than these are needed
+    assert rep["cause"] == "inconclusive"
+    ev = rep["evidence"]
+    assert ev["leader"] == "noise" and "upper 95 % bound" in ev["decides"]
+    assert ev["evaluation_rows_needed"] > rep["n_evaluation"] and ev["recordings_needed"] > len(data)
+    validate_report(rep, n_columns=short_chain.n_columns)
+    md = render(rep, {}, tmp_path)
+    assert "**Cause: inconclusive**" in md and f"About {ev['recordings_needed']} recordings" in md
 
 
 def test_split_is_seeded_stratified_and_disjoint():
@@ -132,18 +151,84 @@ def test_a_candidate_with_non_finite_spectrograms_is_left_out(radar, short_chain
 
 def test_a_significant_but_small_gain_names_no_cause():
     """The practical-relevance rule: a candidate whose gain is significant (CI above 0, clearly ahead of
-    the runner-up) but below ``min_gap_closed`` is reported, not named; at or above it, it is named."""
+    the runner-up) but bounded below ``min_gap_closed`` gives "none"; at or above it, it is named; a
+    leader whose CI reaches past the threshold without excluding 0 gives "inconclusive"."""
     rng = np.random.default_rng(0)
     before = rng.uniform(0.8, 0.9, 200)
     gap = 1.0 - before
 
-    def cand(name: str, closed: float) -> Candidate:
+    def cand(name: str, closed: float, ci95: tuple[float, float] | None = None) -> Candidate:
         ssim = before + closed * gap + rng.normal(0.0, 1e-4, before.shape)
-        return Candidate(name, {}, GridFit(name, [], []), ssim, np.zeros_like(ssim), closed, (0.8 * closed, 1.2 * closed))
+        return Candidate(name, {}, GridFit(name, [], []), ssim, np.zeros_like(ssim), closed,
+                         ci95 or (0.8 * closed, 1.2 * closed))
 
     small, other = cand("noise", 0.01), cand("palm", 0.0)
     cfg = DiagnosisConfig(n_boot=200)
     assert cfg.min_gap_closed == 0.02
-    ev = _evidence(before, [small, other], cfg)
+    cause, ev = _evidence(before, [small, other], cfg)
     assert ev["clearly_ahead"] and not ev["leader_significant"]
-    assert _evidence(before, [small, other], DiagnosisConfig(n_boot=200, min_gap_closed=0.005))["leader_significant"]
+    assert cause == "none" and ev["recordings_needed"] is None  # its CI [0.008, 0.012] ends below 0.02
+    cause, ev = _evidence(before, [small, other], DiagnosisConfig(n_boot=200, min_gap_closed=0.005))
+    assert cause == "noise" and ev["leader_significant"]
+    wide = cand("noise", 0.03, (-0.02, 0.08))  # clearly ahead of palm, but its own CI contains 0
+    cause, ev = _evidence(before, [wide, other], cfg)
+    assert ev["clearly_ahead"] and cause == "inconclusive"
+    # the CI's half-width 0.05 must shrink to 0.03 from 200 evaluation rows: 200 * (5/3)^2 = 555.6 -> 556
+    # rows; over calibration + evaluation at fraction 0.5: 1111.1 -> 1112 recordings
+    assert (ev["evaluation_rows_needed"], ev["recordings_needed"]) == (556, 1112)
+    assert "CI of gap_closed above 0" in ev["decides"]
+
+
+def test_rows_to_decide_scales_the_half_width_with_one_over_sqrt_rows():
+    # [0.01, 0.05] from 50 rows: half-width 0.02; to shrink it to a margin of 0.01 takes 4x the rows
+    assert rows_to_decide(50, (0.01, 0.05), 0.01) == pytest.approx(200.0)
+    assert rows_to_decide(50, (-0.01, 0.05), 0.06) == 51.0  # a skewed CI: never fewer rows than failed
+    assert rows_to_decide(50, (0.01, 0.05), 0.0) is None
+    assert rows_to_decide(50, (0.01, 0.05), -0.01) is None
+    assert rows_to_decide(50, (float("nan"), 0.05), 0.01) is None
+
+
+DECIDE = {"min_gap_closed": 0.02, "n_eval": 60, "calibration_fraction": 0.5}
+
+
+def test_decide_names_a_significant_leader_clearly_ahead():
+    v = decide("palm", 0.10, (0.05, 0.15), 0.04, (0.01, 0.07), **DECIDE)
+    assert v == {"cause": "palm", "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
+    assert decide("palm", 0.10, (0.05, 0.15), None, None, **DECIDE)["cause"] == "palm"  # no runner-up
+
+
+def test_decide_says_none_when_the_leader_is_bounded_below_the_threshold():
+    # significant (CI above 0) but its upper bound 0.016 < 0.02; the lead over the runner-up is irrelevant
+    v = decide("noise", 0.010, (0.004, 0.016), 0.005, (-0.002, 0.012), **DECIDE)
+    assert v == {"cause": "none", "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
+    assert decide("noise", 0.0, (0.0, 0.0), 0.0, (0.0, 0.0), **DECIDE)["cause"] == "none"  # no gain at all
+
+
+@pytest.mark.parametrize("args, kw, rows, recordings, shows", [
+    # straddles the threshold, estimate below it: prove the upper bound below 0.02. Half-width 0.01 must
+    # shrink to 0.02 - 0.015 = 0.005: 60 * (0.01 / 0.005)^2 = 240 rows (the lead's CI, containing 0, does
+    # not count: a "none" needs no separation from the runner-up)
+    (("noise", 0.015, (0.005, 0.025), 0.002, (-0.01, 0.014)), {}, 240, 480, "upper 95 % bound"),
+    # relevant and significant, lead CI contains 0: half-width 0.015 to the lead 0.01: 60 * 1.5^2 = 135 rows
+    (("palm", 0.05, (0.03, 0.07), 0.01, (-0.005, 0.025)), {}, 135, 270, "lead over the runner-up"),
+    # ... at a calibration fraction of 0.6: 135 / 0.4 = 337.5 -> 338 recordings
+    (("palm", 0.05, (0.03, 0.07), 0.01, (-0.005, 0.025)), {"calibration_fraction": 0.6}, 135, 338, "lead"),
+    # both fail; the leader's own CI needs more: half-width 0.05 to 0.03: 60 * (5/3)^2 = 166.7 -> 167 rows,
+    # the lead's 0.03 to 0.02: 60 * 1.5^2 = 135; at calibration fraction 0.25: 166.7 / 0.75 = 222.2 -> 223
+    (("palm", 0.03, (-0.02, 0.08), 0.02, (-0.01, 0.05)), {"calibration_fraction": 0.25}, 167, 223,
+     "CI of gap_closed above 0 and"),
+    # no runner-up, own CI contains 0: half-width 0.04 to 0.03: 60 * (4/3)^2 = 106.7 -> 107 rows
+    (("palm", 0.03, (-0.01, 0.07), None, None), {}, 107, 214, "CI of gap_closed above 0"),
+])
+def test_decide_is_inconclusive_with_the_recordings_that_would_decide(args, kw, rows, recordings, shows):
+    v = decide(*args, **{**DECIDE, **kw})
+    assert v["cause"] == "inconclusive"
+    assert (v["evaluation_rows_needed"], v["recordings_needed"]) == (rows, recordings)
+    assert shows in v["decides"] and "no estimate" not in v["decides"]
+
+
+def test_decide_gives_no_estimate_when_a_margin_is_not_positive():
+    # relevant and significant, but tied with the runner-up (lead 0): no number of rows separates them
+    v = decide("palm", 0.05, (0.03, 0.07), 0.0, (-0.01, 0.01), **DECIDE)
+    assert v["cause"] == "inconclusive" and v["recordings_needed"] is None and v["evaluation_rows_needed"] is None
+    assert "no estimate" in v["decides"] and "lead over the runner-up" in v["decides"]

@@ -39,6 +39,11 @@ def test_valid_report_passes_and_round_trips(tmp_path):
     (lambda r: r["where"]["by_factor"].pop("subject"), "by_factor"),
     (lambda r: r["candidates"].reverse(), "sorted"),
     (lambda r: r.update(cause="palm"), "cause"),
+    (lambda r: r.update(cause="undecided"), "cause must be 'none', 'inconclusive'"),
+    (lambda r: r.update(cause="inconclusive"), "recordings_needed"),  # no evidence
+    (lambda r: r.update(cause="inconclusive", evidence={"recordings_needed": 0}), "recordings_needed"),
+    (lambda r: r.update(cause="inconclusive", evidence={"recordings_needed": 12.5}), "recordings_needed"),
+    (lambda r: r.update(cause="inconclusive", evidence={"recordings_needed": True}), "recordings_needed"),
     (lambda r: r["candidates"][0].update(ci95=[0.3, 0.1]), "ci95"),
     (lambda r: r["baseline"].update(ssim=float("nan")), "baseline.ssim"),
     (lambda r: r["after"].update(effects=["forearm"]), "after.effects"),
@@ -51,3 +56,15 @@ def test_violations_are_named(mutate, message, tmp_path):
     with pytest.raises(ReportError):
         write_report(tmp_path / "bad.json", r)
     assert not (tmp_path / "bad.json").exists()
+
+
+@pytest.mark.parametrize("cause, evidence", [
+    ("none", {}),
+    ("inconclusive", {"decides": "occlusion's 95 % CI of gap_closed above 0", "evaluation_rows_needed": 310,
+                      "recordings_needed": 620}),
+    ("inconclusive", {"decides": "...; no estimate: ...", "evaluation_rows_needed": None, "recordings_needed": None}),
+])
+def test_none_and_inconclusive_causes_pass(cause, evidence, tmp_path):
+    r = {**valid_report(), "cause": cause, "evidence": evidence, "after": {**valid_report()["after"], "effects": []}}
+    validate_report(r)
+    assert json.loads(write_report(tmp_path / "gap_report.json", r).read_text())["cause"] == cause

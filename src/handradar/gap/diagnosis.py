@@ -15,9 +15,12 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    calibration split only (the documented grid, Effect.grid(), or ``grids``; then optional gradient
    steps for ``fit == "grad"``); its gap_closed on the evaluation split gets a paired-bootstrap 95 % CI,
    and the change it makes is correlated with the baseline residual (its signature);
-   ``cause`` = the leading candidate when its CI excludes 0, its gap_closed is at least
-   ``min_gap_closed``, and the paired bootstrap of its lead over the runner-up excludes 0;
-   else "none" (the evidence: report key ``evidence``);
+   ``cause`` (:func:`decide`; its numbers: report key ``evidence``) has three outcomes:
+   the leading candidate when its CI excludes 0, its gap_closed is at least ``min_gap_closed``,
+   and the paired bootstrap of its lead over the runner-up excludes 0; "none" when the upper end
+   of the leader's CI is below ``min_gap_closed`` (no candidate closes a relevant part of the gap);
+   else "inconclusive", with an estimate of the recordings that would decide it
+   (``recordings_needed``, from the CI half-widths scaled by 1/sqrt(rows));
 4. how far: greedy forward selection from the leader, refitting every remaining candidate on
    calibration given those chosen, while one still closes a significant part of the remaining gap;
    then each chosen effect is refitted given the others; ``after`` is the combined result on the
@@ -31,12 +34,15 @@ Public API:
     DiagnosisConfig(...)        (fields below; conf/diagnose.yaml ``diagnose:``)
     diagnose(data: GapData, build: SimFactory, base: {effect: params}, cfg, *, cache_dir=None,
              progress=True) -> Diagnosis (report dict + the arrays the figures need)
+    decide(effect, gap_closed, ci95, lead, lead_ci95, *, min_gap_closed, n_eval, calibration_fraction)
+        -> {"cause", "decides", "evaluation_rows_needed", "recordings_needed"}   (step 3's verdict)
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
@@ -130,6 +136,67 @@ class DiagnosisConfig:
         return cls(**cfg)
 
 
+Z95 = 1.96  # a 95 % CI read as mean +- Z95 * se (the recordings estimate of an inconclusive verdict)
+
+
+def significant(gap_closed: float, ci95: Sequence[float], min_gap_closed: float) -> bool:
+    """A candidate's gain is real (CI above 0) and relevant (at least ``min_gap_closed``)."""
+    return ci95[0] > 0 and gap_closed >= min_gap_closed
+
+
+def rows_to_decide(n_eval: int, ci95: Sequence[float], margin: float) -> float | None:
+    """Evaluation rows at which the half-width of a 95 % CI like ``ci95`` (from ``n_eval`` rows)
+    shrinks to ``margin``, the distance from its mean to the bound it must clear: with
+    se = (hi - lo) / (2 Z95) and se ~ 1/sqrt(rows), n_eval * (Z95 se / margin)^2. At least
+    n_eval + 1, since n_eval rows did not decide it (a skewed percentile CI can put the symmetric
+    estimate below n_eval). None when the margin is <= 0 or a number is not finite: no number of
+    rows decides it."""
+    lo, hi = float(ci95[0]), float(ci95[1])
+    if not (math.isfinite(margin) and margin > 0 and math.isfinite(lo) and math.isfinite(hi)):
+        return None
+    se = (hi - lo) / (2.0 * Z95)
+    return max(n_eval * (Z95 * se / margin) ** 2, n_eval + 1.0)
+
+
+def decide(effect: str, gap_closed: float, ci95: Sequence[float], lead: float | None,
+           lead_ci95: Sequence[float] | None, *, min_gap_closed: float, n_eval: int,
+           calibration_fraction: float) -> dict:
+    """The verdict on the leading candidate ``effect`` (gap_closed [ci95]; ``lead`` [lead_ci95]: its
+    paired lead over the runner-up, None without one): ``cause`` = the effect, "none" or
+    "inconclusive", and for "inconclusive" what must be shown (``decides``) and the rows that would
+    show it, if the point estimates held (``evaluation_rows_needed``; ``recordings_needed`` =
+    calibration + evaluation at ``calibration_fraction``; None when no number of rows would)."""
+    out: dict = {"cause": effect, "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
+    ahead = lead_ci95 is None or lead_ci95[0] > 0
+    if significant(gap_closed, ci95, min_gap_closed) and ahead:
+        return out
+    if ci95[1] < min_gap_closed:
+        out["cause"] = "none"
+        return out
+    out["cause"] = "inconclusive"
+    if gap_closed >= min_gap_closed:  # heading for naming the leader: each failing condition must be shown
+        needs: dict[str, float | None] = {}
+        if not ci95[0] > 0:
+            needs[f"{effect}'s 95 % CI of gap_closed above 0"] = rows_to_decide(n_eval, ci95, gap_closed)
+        if not ahead:
+            needs[f"the 95 % CI of {effect}'s lead over the runner-up above 0"] = rows_to_decide(
+                n_eval, lead_ci95, float("nan") if lead is None else lead)
+    else:  # heading for "none": only the leader's upper bound matters, whatever the runner-up does
+        needs = {f"{effect}'s upper 95 % bound of gap_closed below min_gap_closed {min_gap_closed:g} (cause none)":
+                 rows_to_decide(n_eval, ci95, min_gap_closed - gap_closed)}
+    undecidable = [what for what, n in needs.items() if n is None]
+    if undecidable:
+        out["decides"] = (f"{' and '.join(needs)}; no estimate: the margin of {' and '.join(undecidable)} "
+                          "is <= 0 or not finite")
+        return out
+    rows = max(needs.values())
+    out["decides"] = " and ".join(needs)
+    # rounded before the ceiling: float noise (240.00000000001 rows) must not ask for one more row
+    out["evaluation_rows_needed"] = math.ceil(round(rows, 6))
+    out["recordings_needed"] = math.ceil(round(rows / (1.0 - calibration_fraction), 6))
+    return out
+
+
 @dataclass
 class Candidate:
     effect: str
@@ -143,7 +210,7 @@ class Candidate:
     spectrograms: np.ndarray | None = None  # evaluation rows
 
     def significant(self, min_gap_closed: float) -> bool:
-        return self.ci95[0] > 0 and self.gap_closed >= min_gap_closed
+        return significant(self.gap_closed, self.ci95, min_gap_closed)
 
     def entry(self, min_gap_closed: float) -> dict:
         return {"effect": self.effect, "params": {k: float(v) for k, v in self.params.items()},
@@ -238,15 +305,17 @@ class _Runner:
         return base_spec, out
 
 
-def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> dict:
-    """The rule that names a cause, with its numbers (report key ``evidence``)."""
+def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> tuple[str, dict]:
+    """The cause and the rule that gives it, with its numbers (report key ``evidence``)."""
     ev: dict = {"rule": "cause = the leading candidate when its 95 % CI of gap_closed excludes 0, its gap_closed "
                         f">= {cfg.min_gap_closed}, and the paired-bootstrap 95 % CI of its lead over the runner-up "
-                        "excludes 0; otherwise none",
+                        f"excludes 0; none when the upper end of the leader's CI is below {cfg.min_gap_closed}; "
+                        "otherwise inconclusive, with the recordings that would decide it (CI half-widths scaled "
+                        "by 1/sqrt(rows))",
                 "leader": None, "runner_up": None, "leader_significant": False, "lead": None, "lead_ci95": None,
-                "clearly_ahead": False}
+                "clearly_ahead": False, "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
     if not cands:
-        return ev
+        return "none", ev
     lead = cands[0]
     ev["leader"] = lead.effect
     ev["leader_significant"] = lead.significant(cfg.min_gap_closed)
@@ -257,7 +326,12 @@ def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) 
                   clearly_ahead=bool(ci[0] > 0))
     else:
         ev["clearly_ahead"] = True
-    return ev
+    verdict = decide(lead.effect, lead.gap_closed, lead.ci95, ev["lead"], ev["lead_ci95"],
+                     min_gap_closed=cfg.min_gap_closed, n_eval=len(before),
+                     calibration_fraction=cfg.calibration_fraction)
+    cause = verdict.pop("cause")
+    ev.update(verdict)
+    return cause, ev
 
 
 class _Steps:
@@ -345,9 +419,7 @@ class _Steps:
         self.before_ssim, self.before_mse = self.runner.scores(self.base_spec, self.ev)
         self.bones.add(torch.stack([powers[int(r)] for r in self.ev]), d.measured[self.ev] - self.base_spec,
                        self.base_spec)
-        self.evidence = _evidence(self.before_ssim, self.cands, cfg)
-        lead = self.evidence["leader_significant"] and self.evidence["clearly_ahead"]
-        self.cause = self.evidence["leader"] if lead else "none"
+        self.cause, self.evidence = _evidence(self.before_ssim, self.cands, cfg)
 
     def how_far(self) -> None:
         """Greedy forward selection from the leader while a candidate still closes a significant part."""

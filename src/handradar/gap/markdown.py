@@ -20,6 +20,22 @@ def _calibration(cal: dict | None) -> str:
             f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
 
 
+def _cause(cause: str, ev: dict) -> str:
+    """The cause line; what "none" and "inconclusive" rest on, and the recordings that would decide the latter."""
+    line = f"- **Cause: {cause}**"
+    if cause == "none" and ev.get("leader"):
+        return line + (" (the leader's 95 % CI of gap_closed ends below the relevance threshold: no candidate "
+                       "closes a relevant part of the gap)")
+    if cause != "inconclusive":
+        return line
+    line += (" (the leading candidate may close a relevant part of the gap, but its gain is not significant or "
+             "not separable from the runner-up's: neither an effect nor none is shown)")
+    if ev.get("recordings_needed") is None:
+        return line + f". No number of recordings is estimated to decide it: {ev.get('decides') or '-'}."
+    return (line + f". About {ev['recordings_needed']} recordings ({ev['evaluation_rows_needed']} evaluation rows; "
+            f"CI half-widths scaled by 1/sqrt(rows), if the estimates held) would show {ev['decides']}.")
+
+
 def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = "") -> str:
     """Markdown of a (validated) report; ``figures`` by name as written by handradar.viz.gap."""
     rel = {k: Path(v).relative_to(out_dir).as_posix() if Path(v).is_relative_to(out_dir) else str(v)
@@ -34,7 +50,7 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
               f"{report['n_evaluation']} evaluation (every number below)",
               f"- Baseline: SSIM {fmt_number(base['ssim'])}, MSE {fmt_number(base['mse'], 5)}, gap = 1 - SSIM = {fmt_number(1 - base['ssim'])}"
               + _calibration(base.get("calibration")),
-              f"- **Cause: {report['cause']}**",
+              _cause(report["cause"], ev),
               f"- After adding {', '.join(after['effects']) or 'nothing'}: SSIM {fmt_number(after['ssim'])}, "
               f"gap closed {fmt_number(after['gap_closed'], signed=True)}", ""]
     lines += ["## Where", "",

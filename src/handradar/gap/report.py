@@ -12,6 +12,7 @@ from handradar.atomic import atomic_write_text
 
 FORMAT = "handradar.gap_report/1"
 FACTORS = ("gesture", "angle_deg", "hands", "occlusion", "subject")
+VERDICTS = ("none", "inconclusive")  # the values of ``cause`` that name no effect (handradar.gap.diagnosis.decide)
 
 
 class ReportError(ValueError):
@@ -80,8 +81,14 @@ def validate_report(report: dict, *, n_doppler: int = 64, n_columns: int = 32) -
     if closed != sorted(closed, reverse=True):
         raise ReportError("candidates must be sorted by gap_closed, largest first")
     cause = report.get("cause")
-    if cause != "none" and cause not in names:
-        raise ReportError(f"cause must be 'none' or a candidate's effect, found {cause!r}")
+    if cause not in VERDICTS and cause not in names:
+        raise ReportError(f"cause must be 'none', 'inconclusive' or a candidate's effect, found {cause!r}")
+    if cause == "inconclusive":  # its evidence says how many recordings would decide it (null: none would)
+        ev = report.get("evidence")
+        needed = ev.get("recordings_needed", "missing") if isinstance(ev, dict) else "missing"
+        if needed is not None and (not isinstance(needed, int) or isinstance(needed, bool) or needed < 1):
+            raise ReportError(f"evidence.recordings_needed of an inconclusive cause must be a positive integer "
+                              f"or null, found {needed!r}")
     after = report.get("after")
     _scores(after, "after")
     _number(after, "gap_closed", "after")
