@@ -111,6 +111,19 @@ def _pct(fraction: str | float) -> str:
     return f"{float(fraction) * 100:g} %"
 
 
+def synthesis_setting(p: Mapping[str, str]) -> str:
+    """How a job's synthetic rows were made, when not by the configured simulator as is: its rows
+    must not be averaged with those of other settings (e.g. " [fitted: effects, 2 draws]")."""
+    parts = []
+    if p.get("synth.fit_sim", "none") not in ("none", "None"):
+        parts.append(f"fitted: {p['synth.fit_sim']}")
+    if int(float(p.get("synth.samples_per_row", 1))) > 1:
+        parts.append(f"{int(float(p['synth.samples_per_row']))} draws")
+    elif any(k.startswith("synth.randomize.") for k in p):
+        parts.append("randomised")
+    return f" [{', '.join(parts)}]" if parts else ""
+
+
 def build_tables(records: Iterable[Mapping]) -> list[Table]:
     """Tables I-IV from job records; a table without records is left out."""
     variant_cols = [label for _, label in VARIANT_COLUMNS]
@@ -151,6 +164,8 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             row, table, key = _pct(p["split.fraction"]) + ("*" if fixed else ""), few, (fixed, float(p["split.fraction"]))
         else:
             continue
+        setting = synthesis_setting(p)
+        row, key = row + setting, (*key, setting)
         for variant, label in VARIANT_COLUMNS:
             value = metrics.get(f"test/acc_{variant}")
             if value is not None:
