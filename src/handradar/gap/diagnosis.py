@@ -7,7 +7,13 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    paper's formula) that fits the calibration split best (``rcs_exponents``). This generic
    calibration comes first so that candidates are scored on the gap it leaves: without it, any
    candidate that adds slow, broad returns (a palm disc, radar-table image paths) closes part of the generic
-   "the cylinders are too specular" gap in every data set and wins where its effect is absent;
+   "the cylinders are too specular" gap in every data set and wins where its effect is absent.
+   Then the parameters of the effects already in the baseline (``sim.effects``) are fitted on the same
+   rows, each on its grid (Effect.grid(), or ``grids``) given the others, in one coordinate pass in
+   vocabulary order; the fitted values replace the defaults in the baseline before any candidate is
+   scored (a baseline noise effect at its default SNR would otherwise leave a gap no candidate closes).
+   The baseline, like every simulator here, averages a noise effect over ``noise_draws`` draws in
+   power: it too is compared through its expected spectrogram;
 2. where: the signed mean residual (measured - simulated) over Doppler and time, SSIM by factor
    (gesture, angle, hands, occlusion, subject), and per reflection point from the per-bone
    decomposition (handradar.gap.where.BoneResiduals); all on the evaluation split;
@@ -60,7 +66,9 @@ from handradar.gap.fit import (
     GridFit,
     calibrate_rcs_exponent,
     effect_grid,
+    fit_baseline_effects,
     grid_fit,
+    in_vocabulary_order,
     refine,
 )
 from handradar.gap.report import FACTORS, FORMAT
@@ -83,7 +91,6 @@ from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
 from handradar.sim.effects import REGISTRY
 from handradar.sim.factory import SimFactory
 from handradar.sim.features import BoneFeatures, cached_bone_features
-from handradar.vocab import EFFECTS
 
 log = logging.getLogger(__name__)
 
@@ -341,8 +348,11 @@ class _Steps:
                  progress: bool) -> None:
         self.data, self.cfg, self.cache_dir, self.progress = data, cfg, cache_dir, progress
         self.base = {k: dict(v) for k, v in base.items()}
-        order = list(EFFECTS) + sorted(set(REGISTRY) - set(EFFECTS))
-        self.names = [n for n in order if n not in self.base and (cfg.candidates is None or n in cfg.candidates)]
+        self.names = [n for n in in_vocabulary_order(REGISTRY)
+                      if n not in self.base and (cfg.candidates is None or n in cfg.candidates)]
+        # every simulator of the diagnosis, the baseline's included, comes from this factory: a noise
+        # effect in the baseline is power-averaged over noise_draws draws like a noise candidate, so
+        # the baseline is compared through its expected spectrogram too (no single speckle pattern)
         self.build = build.replace(noise_draws=cfg.noise_draws)
         self.base_sim = self.build(self.base)
         self.features: BoneFeatures | None = None
@@ -372,11 +382,13 @@ class _Steps:
         self.refine_idx = _subset(labels, self.cal, cfg.refine_rows, cfg.seed + 2)
 
     def calibrate(self) -> None:
-        """Step 0: the baseline's generic calibration (module doc) before any candidate is scored."""
+        """Step 0 (module doc) before any candidate is scored: the RCS exponent, then the parameters of
+        the baseline's own effects given it; both on the fitting rows, the fitted values replace the
+        defaults in the baseline."""
         cfg, d = self.cfg, self.data
         if "occlusion" in self.base:  # the baseline simulated below then needs visibility
             self.bone_features()
-        self.calibration = {"rcs_exponent": 1.0, "grid": []}
+        self.calibration: dict = {"rcs_exponent": 1.0, "grid": []}
         self.exponents = list(cfg.rcs_exponents or [1.0])
         if self.exponents != [1.0]:
             with _bar(len(self.fit_idx) * len(self.exponents), "step 0: calibrate the RCS exponent", self.progress) as bar:
@@ -385,7 +397,12 @@ class _Steps:
             self.calibration = {"rcs_exponent": best,
                                 "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(self.exponents, scores)]}
             self.build = self.build.replace(rcs_exponent=best)
-            self.base_sim = self.build(self.base)
+        with _bar(len(self.fit_idx) * len(self.base), "step 0: fit the baseline's effects", self.progress) as bar:
+            self.base, fits = fit_baseline_effects(self.build, self.base, d.rows, self.fit_idx, d.measured,
+                                                   grids=cfg.grids, batch_size=cfg.batch_size, progress=bar.update)
+        self.calibration["effects"] = {k: dict(self.base[k]) for k in fits}
+        self.calibration["effect_grids"] = {k: f.as_dict() for k, f in fits.items()}
+        self.base_sim = self.build(self.base)
 
     def cache(self) -> None:
         """Bone features and the baseline's slot profiles, where the later steps need them."""

@@ -12,12 +12,18 @@ def _params(p: dict) -> str:
 
 
 def _calibration(cal: dict | None) -> str:
-    """The baseline's generic calibration, as a clause of the baseline line."""
-    if not cal or not cal.get("grid"):
-        return " (the paper's cylinder RCS, not calibrated)"
-    tried = ", ".join(f"{g['rcs_exponent']:g}: {fmt_number(g['ssim'])}" for g in cal["grid"])
-    return (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
-            f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
+    """Step 0 (the RCS exponent, the baseline's own effects), as a clause of the baseline line."""
+    cal = cal or {}
+    if not cal.get("grid"):
+        text = " (the paper's cylinder RCS, not calibrated)"
+    else:
+        tried = ", ".join(f"{g['rcs_exponent']:g}: {fmt_number(g['ssim'])}" for g in cal["grid"])
+        text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
+                f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
+    if cal.get("effects"):
+        text += ("; the baseline's own effects fitted there on their grids: "
+                 + "; ".join(f"{k} {_params(v)}" for k, v in cal["effects"].items()))
+    return text
 
 
 def _cause(cause: str, ev: dict) -> str:
