@@ -19,11 +19,12 @@ from handradar.gap.diagnosis import (
 )
 from handradar.gap.fit import GridFit, effect_grid
 from handradar.gap.markdown import render
-from handradar.gap.report import validate_report
+from handradar.gap.report import fitted_simulator, validate_report
+from handradar.metrics import per_example_ssim
 from handradar.sim.effects import REGISTRY, Effect
 from handradar.sim.effects.base import Param
 from handradar.sim.simulator import Simulator
-from tests.gap.conftest import builder, gap_data, rows
+from tests.gap.conftest import builder, gap_data, rows, simulate
 
 CANDIDATES = ["antenna_pattern", "palm", "noise", "multipath"]
 
@@ -112,6 +113,46 @@ def test_baseline_calibration_recovers_the_rcs_exponent(radar, short_chain):
     assert scores[0.5] == pytest.approx(1.0, abs=1e-4) and scores[0.5] > max(scores[1.0], scores[0.25])
     assert rep["baseline"]["ssim"] == pytest.approx(1.0, abs=1e-4)
     assert rep["cause"] == "none"  # the calibrated baseline leaves no gap for a candidate to close
+
+
+def test_step_0_fits_the_baselines_noise_and_compares_its_expected_spectrogram(radar, short_chain, tmp_path):
+    # "measured" = one noise draw at 5 dB (like a measurement); the baseline's noise sits at its default 20 dB
+    data = gap_data(radar, short_chain, 12, {"noise": {"snr_db": 5.0}}, seed=3)
+    cfg = DiagnosisConfig(candidates=["palm"], radarweightnet=False, n_boot=200)
+    d = diagnose(data, builder(radar, short_chain), {"noise": {}}, cfg, progress=False)
+    rep = d.report
+    validate_report(rep, n_columns=short_chain.n_columns)
+    cal = rep["baseline"]["calibration"]
+    snr = cal["effects"]["noise"]["snr_db"]
+    assert abs(snr - 5.0) <= 5.0  # a grid step (5 dB) from the truth, far from the default 20 dB
+    assert rep["baseline"]["effects"] == cal["effects"]
+    assert cal["effect_grids"]["noise"]["best"] == {"snr_db": snr}
+    assert "noise snr_db=" in render(rep, {}, tmp_path)
+    # the evaluation rows as the unfitted baseline scored them before: default SNR, one draw
+    rs = data.rows.take(d.evaluation)
+    target = torch.as_tensor(d.measured)
+    unfitted = float(per_example_ssim(target, torch.as_tensor(simulate(radar, short_chain, rs, {"noise": {}}))).mean())
+    fitted_single = simulate(radar, short_chain, rs, {"noise": {"snr_db": snr}})
+    assert rep["baseline"]["ssim"] > unfitted + 0.1
+    assert rep["baseline"]["ssim"] > float(per_example_ssim(target, torch.as_tensor(fitted_single)).mean())
+    # the baseline is the expected spectrogram (noise_draws draws averaged in power), closer to the
+    # 64-draw average than one draw at the same SNR is
+    expected = simulate(radar, short_chain, rs, {"noise": {"snr_db": snr, "draws": 64}})
+    assert np.abs(d.baseline - expected).mean() < 0.8 * np.abs(fitted_single - expected).mean()
+
+
+def test_step_0_recovers_a_baseline_effects_parameter(radar, short_chain):
+    # measured with the antenna's cos^q pattern at q = 8; the baseline has it at its default q = 4
+    data = gap_data(radar, short_chain, 12, {"antenna_pattern": {"q": 8.0}})
+    cfg = DiagnosisConfig(candidates=["palm", "noise"], radarweightnet=False, n_boot=200)
+    rep = diagnose(data, builder(radar, short_chain), {"antenna_pattern": {}}, cfg, progress=False).report
+    validate_report(rep, n_columns=short_chain.n_columns)
+    assert rep["baseline"]["calibration"]["effects"] == {"antenna_pattern": {"q": 8.0}}
+    assert rep["baseline"]["effects"] == {"antenna_pattern": {"q": 8.0}}
+    assert rep["baseline"]["calibration"]["rcs_exponent"] == 1.0
+    assert rep["baseline"]["ssim"] == pytest.approx(1.0, abs=1e-4) and rep["cause"] == "none"
+    sim = fitted_simulator(rep, {})
+    assert sim["effects"] == ["antenna_pattern"] and sim["effect_params"] == {"antenna_pattern": {"q": 8.0}}
 
 
 def test_grid_overrides_replace_the_documented_values():

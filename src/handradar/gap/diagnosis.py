@@ -7,7 +7,13 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    paper's formula) that fits the calibration split best (``rcs_exponents``). This generic
    calibration comes first so that candidates are scored on the gap it leaves: without it, any
    candidate that adds slow, broad returns (a palm disc, radar-table image paths) closes part of the generic
-   "the cylinders are too specular" gap in every data set and wins where its effect is absent;
+   "the cylinders are too specular" gap in every data set and wins where its effect is absent.
+   Then the parameters of the effects already in the baseline (``sim.effects``) are fitted on the same
+   rows, each on its grid (Effect.grid(), or ``grids``) given the others, in one coordinate pass in
+   vocabulary order; the fitted values replace the defaults in the baseline before any candidate is
+   scored (a baseline noise effect at its default SNR would otherwise leave a gap no candidate closes).
+   The baseline, like every simulator here, averages a noise effect over ``noise_draws`` draws in
+   power: it too is compared through its expected spectrogram;
 2. where: the signed mean residual (measured - simulated) over Doppler and time, SSIM by factor
    (gesture, angle, hands, occlusion, subject), and per reflection point from the per-bone
    decomposition (handradar.gap.where.BoneResiduals); all on the evaluation split;
@@ -27,6 +33,23 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    evaluation split;
 5. optionally, how much a RadarWeightNet trained on the calibration split closes (handradar.gap.rwn).
 
+Cross-fitting (``folds`` = k >= 2, in place of the single split; ``calibration_fraction`` unused): the
+rows are cut, seeded and stratified by gesture, into k folds (:func:`cross_folds`; each holds every
+gesture). For each fold, step 0 and every fit of steps 3 and 4 run on the other k - 1 folds (the
+fitting subsets ``fit_rows``/``refine_rows`` drawn from them) and predict the fold's rows. Every row
+is so scored out of fold, and every number computed from the scores uses all N rows: per-row SSIM,
+the bootstrap CIs, the lead test and ``cause`` (the same rule, n_eval = N, and recordings_needed =
+evaluation rows, since every recording is one), the greedy selection (each fold adds the chosen
+effect at its own fitted values; which effect is chosen is decided on the out-of-fold scores),
+``after``, and step 2 (from the out-of-fold baseline). The reported parameters (candidates'
+``params``, ``after.params``, ``baseline.effects`` and ``calibration``, hence fitted_sim.yaml) come
+from one more fit of every step on all N rows; each fold's own are ``fold_params`` per candidate and
+``baseline.calibration.folds``. Not cross-fitted: the RadarWeightNet readout (step 5) trains on the
+other folds of fold 0 and is scored on fold 0's rows only (``radarweightnet.evaluation_rows``).
+Report convention: ``n_evaluation`` = N; ``n_calibration`` = the fewest rows any fold's fits saw
+(N minus the largest fold). With folds = 1 (the default) nothing of this applies: the diagnosis is
+the single split above, number for number.
+
 No code here reads meta.json ``truth``: the rows come from a dataset file, which has none.
 
 Public API:
@@ -41,11 +64,12 @@ Public API:
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import math
 import tempfile
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -60,7 +84,9 @@ from handradar.gap.fit import (
     GridFit,
     calibrate_rcs_exponent,
     effect_grid,
+    fit_baseline_effects,
     grid_fit,
+    in_vocabulary_order,
     refine,
 )
 from handradar.gap.report import FACTORS, FORMAT
@@ -83,7 +109,7 @@ from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
 from handradar.sim.effects import REGISTRY
 from handradar.sim.factory import SimFactory
 from handradar.sim.features import BoneFeatures, cached_bone_features
-from handradar.vocab import EFFECTS
+from handradar.sim.simulator import Simulator
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +119,7 @@ class DiagnosisConfig:
     """Settings of a diagnosis (``diagnose:`` in conf/diagnose.yaml)."""
 
     seed: int = 0  # fixes the split, the fitting subsets, the bootstrap and RadarWeightNet's training
-    calibration_fraction: float = 0.5
+    calibration_fraction: float = 0.5  # the single split's calibration share (folds = 1 only)
     candidates: list[str] | None = None  # None: every effect not in the baseline simulator
     rcs_exponents: list[float] | None = field(default_factory=lambda: [1.0, 0.75, 0.5, 0.25, 0.1, 0.0])
     # the baseline's cylinder RCS aspect exponents tried (None or [1.0]: the paper's RCS, uncalibrated)
@@ -114,6 +140,7 @@ class DiagnosisConfig:
     rwn_hidden: int = 64
     rwn_rows: int | None = None  # calibration rows RadarWeightNet trains on (None: all)
     n_examples: int = 4  # before/after examples in the markdown
+    folds: int = 1  # 1: one calibration/evaluation split; k >= 2: cross-fitting in k folds (module doc)
 
     @classmethod
     def from_mapping(cls, cfg: Mapping | None) -> DiagnosisConfig:
@@ -200,36 +227,65 @@ def decide(effect: str, gap_closed: float, ci95: Sequence[float], lead: float | 
 @dataclass
 class Candidate:
     effect: str
-    params: dict[str, float]
-    fit: GridFit
-    ssim: np.ndarray  # per evaluation row
+    params: dict[str, float]  # fitted on the parameter-fitting rows (with folds: all rows)
+    fit: GridFit  # that fit's grid scores
+    ssim: np.ndarray  # per evaluation row (with folds: every row, scored out of fold)
     mse: np.ndarray
     gap_closed: float = 0.0
     ci95: tuple[float, float] = (0.0, 0.0)
     signature: float = 0.0
     spectrograms: np.ndarray | None = None  # evaluation rows
+    fold_params: list[dict[str, float]] = field(default_factory=list)  # with folds: each fold's fit (scores its rows)
 
     def significant(self, min_gap_closed: float) -> bool:
         return significant(self.gap_closed, self.ci95, min_gap_closed)
 
     def entry(self, min_gap_closed: float) -> dict:
-        return {"effect": self.effect, "params": {k: float(v) for k, v in self.params.items()},
-                "ssim": float(self.ssim.mean()), "mse": float(self.mse.mean()), "gap_closed": float(self.gap_closed),
-                "ci95": [float(self.ci95[0]), float(self.ci95[1])], "significant": self.significant(min_gap_closed),
-                "signature_correlation": float(self.signature), "fit": self.fit.as_dict()}
+        out = {"effect": self.effect, "params": {k: float(v) for k, v in self.params.items()},
+               "ssim": float(self.ssim.mean()), "mse": float(self.mse.mean()), "gap_closed": float(self.gap_closed),
+               "ci95": [float(self.ci95[0]), float(self.ci95[1])], "significant": self.significant(min_gap_closed),
+               "signature_correlation": float(self.signature), "fit": self.fit.as_dict()}
+        if self.fold_params:
+            out["fold_params"] = [{k: float(v) for k, v in p.items()} for p in self.fold_params]
+        return out
+
+    def on_rows(self, pos: np.ndarray, before_ssim: np.ndarray, params: dict[str, float]) -> Candidate:
+        """This candidate on the evaluation positions ``pos`` only, at ``params`` (the fit that scored
+        them); gap_closed against ``before_ssim`` (all evaluation rows), no CI."""
+        return dataclasses.replace(self, params=params, ssim=self.ssim[pos], mse=self.mse[pos],
+                                   gap_closed=float(gap_closed(before_ssim[pos], self.ssim[pos])),
+                                   spectrograms=None, fold_params=[])
 
 
 @dataclass
 class Diagnosis:
     report: dict
-    calibration: np.ndarray
-    evaluation: np.ndarray
+    calibration: np.ndarray  # the rows the reported parameters are fitted on (with folds: all)
+    evaluation: np.ndarray  # the rows every score is on (with folds: all, fold by fold)
     measured: np.ndarray  # evaluation rows
     baseline: np.ndarray  # evaluation rows, baseline simulator
     candidates: dict[str, np.ndarray] = field(default_factory=dict)  # effect -> evaluation spectrograms
     after: np.ndarray | None = None
-    rwn: np.ndarray | None = None
+    rwn: np.ndarray | None = None  # the RadarWeightNet readout's rows (rwn_rows)
     meta: dict[str, np.ndarray] = field(default_factory=dict)  # evaluation rows
+    rwn_rows: np.ndarray | None = None  # positions in the evaluation arrays of the rows of ``rwn``
+
+
+@dataclass
+class Fold:
+    """Parameters fitted on rows ``train`` (the grid on its stratified subset ``fit_idx``, gradient
+    steps on ``refine_idx``) and predicted on rows ``test`` (none: the all-rows fit of cross-fitting,
+    which gives the reported parameters). Step 0 sets ``build`` (the calibrated RCS exponent),
+    ``base`` (the baseline's effects at their fitted values) and ``calibration`` (its record)."""
+
+    train: np.ndarray
+    test: np.ndarray
+    fit_idx: np.ndarray
+    refine_idx: np.ndarray
+    build: SimFactory | None = None
+    base: dict[str, dict[str, float]] = field(default_factory=dict)
+    calibration: dict = field(default_factory=dict)
+    profiles: Callable[[np.ndarray], torch.Tensor] | None = None  # rows -> cached baseline slot profiles
 
 
 def _subset(labels: np.ndarray, idx: np.ndarray, n: int | None, seed: int) -> np.ndarray:
@@ -241,15 +297,27 @@ def _subset(labels: np.ndarray, idx: np.ndarray, n: int | None, seed: int) -> np
     return idx[keep]
 
 
+def cross_folds(labels: np.ndarray, k: int, seed: int) -> list[np.ndarray]:
+    """``k`` disjoint parts of the rows (sorted indices), seeded and stratified by class, each holding
+    every class: a k above the rows of the smallest class is refused."""
+    classes, counts = np.unique(labels, return_counts=True)
+    if k < 2:
+        raise ValueError(f"cross-fitting needs at least 2 folds, found {k}")
+    if k > counts.min():
+        raise ValueError(f"diagnose.folds = {k} exceeds the {counts.min()} rows of class {classes[counts.argmin()]!r}: "
+                         f"every fold must hold every class (use at most {counts.min()} folds)")
+    return stratified_partition(labels, [1.0 / k] * k, seed, every_part=True)
+
+
 def _bar(total: int, desc: str, enabled: bool):
     return tqdm(total=total, desc=desc, unit="row", disable=not enabled, leave=False)
 
 
 class _Runner:
-    """One diagnosis: data, simulator builder, settings, and the fitting/evaluation steps."""
+    """Fitting candidates on some rows, predicting and scoring them on others (one diagnosis's data and settings)."""
 
-    def __init__(self, data: GapData, build: SimFactory, cfg: DiagnosisConfig, progress: bool) -> None:
-        self.data, self.build, self.cfg, self.progress = data, build, cfg, progress
+    def __init__(self, data: GapData, cfg: DiagnosisConfig, progress: bool) -> None:
+        self.data, self.cfg, self.progress = data, cfg, progress
         self.target = torch.as_tensor(data.measured)
         self.excluded: list[dict] = []  # candidates left out (non-finite simulations), for the report
 
@@ -276,31 +344,36 @@ class _Runner:
                         f.best, f.best_score, f.refined = values, score, True
         return fits
 
-    def evaluate(self, engine: VariantEngine, fits: dict[str, GridFit], ev: np.ndarray, before_ssim: np.ndarray,
-                 step: str, on_base=None) -> tuple[np.ndarray, list[Candidate]]:
-        """Base (first) and every fitted candidate on the evaluation rows; gap_closed against ``before_ssim``
-        (None: against this engine's base)."""
-        names = list(fits)
-        with _bar(len(ev), f"{step}: evaluate", self.progress) as bar:
-            specs = engine.spectrograms([{}] + [{n: fits[n].best} for n in names], ev, progress=bar.update,
-                                        on_base=on_base)
+    def predict(self, engine: VariantEngine, fits: dict[str, GridFit], idx: np.ndarray, step: str,
+                on_base=None) -> np.ndarray:
+        """Spectrograms (1 + candidates, rows, doppler, columns) on rows ``idx``: the engine's base first,
+        then the base plus each fitted candidate."""
+        with _bar(len(idx), f"{step}: evaluate", self.progress) as bar:
+            return engine.spectrograms([{}] + [{n: f.best} for n, f in fits.items()], idx, progress=bar.update,
+                                       on_base=on_base)
+
+    def assess(self, fold_fits: Sequence[dict[str, GridFit]], specs: np.ndarray, ev: np.ndarray,
+               before_ssim: np.ndarray | None, step: str) -> tuple[np.ndarray, list[Candidate]]:
+        """Candidates scored on the evaluation rows ``ev`` from their spectrograms ``specs`` there (base
+        first, then each candidate of the fits), sorted by gap_closed against ``before_ssim`` (None:
+        against that base). ``fold_fits``: one fit per fold, the last the reported one (module doc)."""
+        *folds, reported = fold_fits
         base_spec = specs[0]
         before = self.scores(base_spec, ev)[0] if before_ssim is None else before_ssim
-        residual = self.data.measured[ev] - base_spec
-        res_map = residual.mean(0)
+        res_map = (self.data.measured[ev] - base_spec).mean(0)
         out = []
-        for name, spec in zip(names, specs[1:]):
+        for name, spec in zip(reported, specs[1:]):
+            fit = reported[name]
             if not np.all(np.isfinite(spec)):
-                log.warning("%s: candidate %s at %s gives non-finite spectrograms; left out", step, name,
-                            fits[name].best)
-                self.excluded.append({"effect": name, "params": fits[name].best, "step": step,
+                log.warning("%s: candidate %s at %s gives non-finite spectrograms; left out", step, name, fit.best)
+                self.excluded.append({"effect": name, "params": fit.best, "step": step,
                                       "reason": "non-finite spectrograms"})
                 continue
             ssim, mse = self.scores(spec, ev)
             boot = bootstrap_gap_closed(before, ssim, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
             change = (spec - base_spec).mean(0)
-            out.append(Candidate(name, fits[name].best, fits[name], ssim, mse, boot.estimate, boot.ci95,
-                                 signature_correlation(res_map, change), spec))
+            out.append(Candidate(name, fit.best, fit, ssim, mse, boot.estimate, boot.ci95,
+                                 signature_correlation(res_map, change), spec, [f[name].best for f in folds]))
         out.sort(key=lambda c: c.gap_closed, reverse=True)
         return base_spec, out
 
@@ -328,84 +401,157 @@ def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) 
         ev["clearly_ahead"] = True
     verdict = decide(lead.effect, lead.gap_closed, lead.ci95, ev["lead"], ev["lead_ci95"],
                      min_gap_closed=cfg.min_gap_closed, n_eval=len(before),
-                     calibration_fraction=cfg.calibration_fraction)
+                     # cross-fitted, every recording is an evaluation row: recordings = evaluation rows
+                     calibration_fraction=cfg.calibration_fraction if cfg.folds == 1 else 0.0)
     cause = verdict.pop("cause")
     ev.update(verdict)
     return cause, ev
 
 
 class _Steps:
-    """One diagnosis run as a sequence of named steps (:data:`STEPS`) sharing its state."""
+    """One diagnosis run as a sequence of named steps (:data:`STEPS`) sharing its state.
+
+    ``folds`` (a list of :class:`Fold`): the last one gives the reported parameters (the single split,
+    or with cross-fitting the all-rows fit after the k folds); ``scored``: the folds with held-out rows,
+    whose predictions, in this order, make the evaluation arrays (``ev``: their rows, concatenated).
+    Every fitting step runs in every fold, each given its own step-0 baseline and its own earlier fits.
+    """
 
     def __init__(self, data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConfig, cache_dir: str | Path,
                  progress: bool) -> None:
         self.data, self.cfg, self.cache_dir, self.progress = data, cfg, cache_dir, progress
         self.base = {k: dict(v) for k, v in base.items()}
-        order = list(EFFECTS) + sorted(set(REGISTRY) - set(EFFECTS))
-        self.names = [n for n in order if n not in self.base and (cfg.candidates is None or n in cfg.candidates)]
+        self.names = [n for n in in_vocabulary_order(REGISTRY)
+                      if n not in self.base and (cfg.candidates is None or n in cfg.candidates)]
+        # every simulator of the diagnosis, the baseline's included, comes from this factory: a noise
+        # effect in the baseline is power-averaged over noise_draws draws like a noise candidate, so
+        # the baseline is compared through its expected spectrogram too (no single speckle pattern)
         self.build = build.replace(noise_draws=cfg.noise_draws)
         self.base_sim = self.build(self.base)
         self.features: BoneFeatures | None = None
         self.features_exponent = 1.0
         self.profiles: SlotProfileCache | None = None
+        self.runner = _Runner(data, cfg, progress)
         self.report: dict = {}
 
-    def bone_features(self) -> None:
-        """Visibility (the occlusion effect) and RadarWeightNet's input, at the simulator's RCS exponent."""
+    def bone_features(self, sim: Simulator) -> None:
+        """Visibility (the occlusion effect) and RadarWeightNet's input, at ``sim``'s RCS exponent."""
         d = self.data
         self.features = cached_bone_features(d.rows.skeletons, d.rows.times, d.rows.masks, d.radar.wavelength_m,
-                                             self.base_sim.hand, self.cache_dir, rcs_exponent=self.base_sim.rcs_exponent,
+                                             sim.hand, self.cache_dir, rcs_exponent=sim.rcs_exponent,
                                              progress=self.progress)
         d.rows.visibility = self.features.visible_fraction()
-        self.features_exponent = self.base_sim.rcs_exponent
+        self.features_exponent = sim.rcs_exponent
+
+    def fold(self, train: np.ndarray, test: np.ndarray) -> Fold:
+        labels, cfg = self.data.labels, self.cfg
+        return Fold(train, test, _subset(labels, train, cfg.fit_rows, cfg.seed + 1),
+                    _subset(labels, train, cfg.refine_rows, cfg.seed + 2))
+
+    def engine(self, fold: Fold, current: Variant, cached: bool = False) -> VariantEngine:
+        """Variants of ``current`` under the fold's calibrated factory (``cached``: from the fold's cached
+        slot profiles, which are those of its step-0 baseline: only when ``current`` is that baseline)."""
+        return VariantEngine(fold.build, current, self.data.rows, batch_size=self.cfg.batch_size,
+                             base_profiles=fold.profiles if cached else None)
+
+    def fit_folds(self, currents: Sequence[Variant], names: Sequence[str], step: str,
+                  cached: bool = False) -> list[dict[str, GridFit]]:
+        """Candidates ``names`` fitted in every fold on its training rows, given its effects ``currents[j]``."""
+        return [self.runner.fit(self.engine(f, cur, cached), names, f.fit_idx, f.refine_idx, step)
+                for f, cur in zip(self.folds, currents)]
+
+    def predict_folds(self, currents: Sequence[Variant], fold_fits: Sequence[dict[str, GridFit]], step: str,
+                      on_base=None, cached: bool = False) -> np.ndarray:
+        """Spectrograms (1 + candidates, evaluation rows, ...) of each fold's base ``currents[j]`` and its
+        fitted candidates on its held-out rows, in evaluation-row order."""
+        specs = [self.runner.predict(self.engine(f, cur, cached), fits, f.test, step, on_base)
+                 for f, cur, fits in zip(self.folds, currents, fold_fits) if len(f.test)]
+        return specs[0] if len(specs) == 1 else np.concatenate(specs, axis=1)
+
+    def crossfit(self, currents: Sequence[Variant], names: Sequence[str], before_ssim: np.ndarray | None, step: str,
+                 on_base=None, cached: bool = False) -> tuple[np.ndarray, list[Candidate]]:
+        """Candidates fitted per fold (:meth:`fit_folds`), predicted on its held-out rows and scored on all
+        evaluation rows (_Runner.assess); the base's evaluation spectrograms and the candidates."""
+        fold_fits = self.fit_folds(currents, names, step, cached)
+        specs = self.predict_folds(currents, fold_fits, step, on_base, cached)
+        return self.runner.assess(fold_fits, specs, self.ev, before_ssim, step)
+
+    @staticmethod
+    def fold_values(c: Candidate) -> list[dict[str, float]]:
+        """A candidate's fitted values per fold of ``folds`` (the cross-fitting folds', then the reported)."""
+        return [*c.fold_params, c.params]
 
     # ---- the steps ---------------------------------------------------------------------------------
     def split(self) -> None:
-        """Calibration and evaluation rows, seeded and stratified by gesture; the fitting subsets."""
+        """The folds (module doc): one calibration/evaluation split, seeded and stratified by gesture; or
+        k cross-fitting folds, each fitted on the others, and the all-rows fit."""
         cfg, labels = self.cfg, self.data.labels
-        f = cfg.calibration_fraction
-        self.cal, self.ev = stratified_partition(labels, (f, 1.0 - f), cfg.seed, every_part=True)
+        if cfg.folds == 1:
+            f = cfg.calibration_fraction
+            self.folds = [self.fold(*stratified_partition(labels, (f, 1.0 - f), cfg.seed, every_part=True))]
+        else:
+            every = np.arange(len(labels))
+            parts = cross_folds(labels, cfg.folds, cfg.seed)
+            self.folds = [self.fold(np.setdiff1d(every, p), p) for p in parts] + [self.fold(every, every[:0])]
+        self.scored = [f for f in self.folds if len(f.test)]
+        self.cal, self.ev = self.folds[-1].train, np.concatenate([f.test for f in self.scored])
         if len(self.ev) < 20:
             log.warning("only %d evaluation rows: bootstrap intervals over so few rows are too narrow to trust "
                         "(use 30 or more)", len(self.ev))
-        self.fit_idx = _subset(labels, self.cal, cfg.fit_rows, cfg.seed + 1)
-        self.refine_idx = _subset(labels, self.cal, cfg.refine_rows, cfg.seed + 2)
+
+    def calibrate_fold(self, fold: Fold) -> None:
+        """Step 0 on one fold's fitting rows: the RCS exponent, then the baseline's own effects given it."""
+        cfg, d = self.cfg, self.data
+        build, calibration = self.build, {"rcs_exponent": 1.0, "grid": []}
+        if self.exponents != [1.0]:
+            with _bar(len(fold.fit_idx) * len(self.exponents), "step 0: calibrate the RCS exponent", self.progress) as bar:
+                best, scores = calibrate_rcs_exponent(build, self.base, d.rows, fold.fit_idx, d.measured,
+                                                      self.exponents, batch_size=cfg.batch_size, progress=bar.update)
+            calibration = {"rcs_exponent": best,
+                           "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(self.exponents, scores)]}
+            build = build.replace(rcs_exponent=best)
+        with _bar(len(fold.fit_idx) * len(self.base), "step 0: fit the baseline's effects", self.progress) as bar:
+            base, fits = fit_baseline_effects(build, self.base, d.rows, fold.fit_idx, d.measured, grids=cfg.grids,
+                                              batch_size=cfg.batch_size, progress=bar.update)
+        calibration["effects"] = {k: dict(base[k]) for k in fits}
+        calibration["effect_grids"] = {k: f.as_dict() for k, f in fits.items()}
+        fold.build, fold.base, fold.calibration = build, base, calibration
 
     def calibrate(self) -> None:
-        """Step 0: the baseline's generic calibration (module doc) before any candidate is scored."""
-        cfg, d = self.cfg, self.data
+        """Step 0 (module doc) before any candidate is scored, in every fold: the RCS exponent, then the
+        parameters of the baseline's own effects given it; the fitted values replace the defaults in the
+        baseline. The reported baseline is the last fold's (the parameter fit)."""
         if "occlusion" in self.base:  # the baseline simulated below then needs visibility
-            self.bone_features()
-        self.calibration = {"rcs_exponent": 1.0, "grid": []}
-        self.exponents = list(cfg.rcs_exponents or [1.0])
-        if self.exponents != [1.0]:
-            with _bar(len(self.fit_idx) * len(self.exponents), "step 0: calibrate the RCS exponent", self.progress) as bar:
-                best, scores = calibrate_rcs_exponent(self.build, self.base, d.rows, self.fit_idx, d.measured,
-                                                      self.exponents, batch_size=cfg.batch_size, progress=bar.update)
-            self.calibration = {"rcs_exponent": best,
-                                "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(self.exponents, scores)]}
-            self.build = self.build.replace(rcs_exponent=best)
-            self.base_sim = self.build(self.base)
+            self.bone_features(self.base_sim)
+        self.exponents = list(self.cfg.rcs_exponents or [1.0])
+        for fold in self.folds:
+            self.calibrate_fold(fold)
+        reported = self.folds[-1]
+        self.build, self.base, self.calibration = reported.build, reported.base, dict(reported.calibration)
+        if len(self.folds) > 1:
+            self.calibration["folds"] = [{k: f.calibration[k] for k in ("rcs_exponent", "effects")}
+                                         for f in self.scored]
+        self.base_sim = self.build(self.base)
 
     def cache(self) -> None:
-        """Bone features and the baseline's slot profiles, where the later steps need them."""
+        """Bone features and the readout fold's baseline slot profiles, where the later steps need them."""
         cfg, d = self.cfg, self.data
+        self.rwn_fold = self.scored[0]  # the RadarWeightNet readout's split (the single split, or fold 0)
+        sim = self.rwn_fold.build(self.rwn_fold.base)
         # RadarWeightNet reads the RCS at the calibrated exponent; visibility alone does not depend on it
-        stale = self.features is None or (cfg.radarweightnet and self.features_exponent != self.base_sim.rcs_exponent)
+        stale = self.features is None or (cfg.radarweightnet and self.features_exponent != sim.rcs_exponent)
         if ("occlusion" in self.names or cfg.radarweightnet) and stale:
-            self.bone_features()
+            self.bone_features(sim)
         if cfg.radarweightnet:
             vis = d.rows.visibility if "occlusion" in self.base else None
             self.profiles = SlotProfileCache(cache_slot_profiles(
-                self.base_sim, d.rows.skeletons, d.rows.masks, self.cache_dir, times=d.rows.times, visibility=vis,
+                sim, d.rows.skeletons, d.rows.masks, self.cache_dir, times=d.rows.times, visibility=vis,
                 batch_size=cfg.batch_size, progress=self.progress))
+            self.rwn_fold.profiles = self.profiles.profiles
 
     def which(self) -> None:
-        """Every candidate fitted on calibration rows and scored on evaluation rows; the cause."""
+        """Every candidate fitted per fold and scored on its held-out rows; the cause."""
         cfg, d = self.cfg, self.data
-        self.runner = _Runner(d, self.build, cfg, self.progress)
-        engine = VariantEngine(self.build, self.base, d.rows, batch_size=cfg.batch_size,
-                               base_profiles=None if self.profiles is None else self.profiles.profiles)
         self.bones = BoneResiduals()
         powers: dict[int, torch.Tensor] = {}
 
@@ -414,49 +560,53 @@ class _Steps:
             for i, r in enumerate(rows):
                 powers[int(r)] = pw[i]
 
-        fits = self.runner.fit(engine, self.names, self.fit_idx, self.refine_idx, "step 1")
-        self.base_spec, self.cands = self.runner.evaluate(engine, fits, self.ev, None, "step 1", on_base=keep_power)
+        self.base_spec, self.cands = self.crossfit([f.base for f in self.folds], self.names, None, "step 1",
+                                                   on_base=keep_power, cached=True)
         self.before_ssim, self.before_mse = self.runner.scores(self.base_spec, self.ev)
         self.bones.add(torch.stack([powers[int(r)] for r in self.ev]), d.measured[self.ev] - self.base_spec,
                        self.base_spec)
         self.cause, self.evidence = _evidence(self.before_ssim, self.cands, cfg)
 
     def how_far(self) -> None:
-        """Greedy forward selection from the leader while a candidate still closes a significant part."""
-        cfg, d = self.cfg, self.data
+        """Greedy forward selection from the leader while a candidate still closes a significant part;
+        each fold adds the chosen effect at its own fitted values."""
+        cfg = self.cfg
         chosen: list[Candidate] = []
         self.selection: list[dict] = [{"step": 1, "base": sorted(self.base), "candidates": [
             {"effect": c.effect, "gap_closed_of_remaining": c.gap_closed, "ci95": list(c.ci95)} for c in self.cands]}]
         pool = [c for c in self.cands if c.significant(cfg.min_gap_closed)]
-        current, ssim, mse, spec = dict(self.base), self.before_ssim, self.before_mse, self.base_spec
+        currents = [f.base for f in self.folds]
+        ssim, mse, spec = self.before_ssim, self.before_mse, self.base_spec
         while pool and len(chosen) < cfg.greedy_max:
             best = pool[0]
             chosen.append(best)
-            current = merge(current, {best.effect: best.params})
+            currents = [merge(cur, {best.effect: v}) for cur, v in zip(currents, self.fold_values(best))]
             ssim, mse, spec = best.ssim, best.mse, best.spectrograms
             # every candidate not chosen is refitted given those chosen, not only the ones significant
             # so far: a small effect (a sync offset) is masked while a larger one (jitter) is unmodelled
-            rest = [n for n in self.names if n not in current and n not in {e["effect"] for e in self.runner.excluded}]
+            excluded = {e["effect"] for e in self.runner.excluded}
+            rest = [n for n in self.names if n not in currents[-1] and n not in excluded]
             if not rest or len(chosen) >= cfg.greedy_max:
                 break
             step = f"step {len(chosen) + 1}"
-            eng = VariantEngine(self.build, current, d.rows, batch_size=cfg.batch_size)
-            fits_k = self.runner.fit(eng, rest, self.fit_idx, self.refine_idx, step)
-            _, cands_k = self.runner.evaluate(eng, fits_k, self.ev, ssim, step)
-            self.selection.append({"step": len(chosen) + 1, "base": sorted(current), "candidates": [
+            _, cands_k = self.crossfit(currents, rest, ssim, step)
+            self.selection.append({"step": len(chosen) + 1, "base": sorted(currents[-1]), "candidates": [
                 {"effect": c.effect, "params": c.params, "gap_closed_of_remaining": c.gap_closed, "ci95": list(c.ci95)}
                 for c in cands_k]})
             pool = [c for c in cands_k if c.significant(cfg.min_gap_closed)]
         params = {c.effect: c.params for c in chosen}
         if len(chosen) > 1:  # each chosen effect refitted given the others (its first fit lacked the later ones)
             for name in list(params):
-                eng = VariantEngine(self.build, {k: v for k, v in current.items() if k != name}, d.rows,
-                                    batch_size=cfg.batch_size)
-                fits_j = self.runner.fit(eng, [name], self.fit_idx, self.refine_idx, "joint refit")
-                params[name] = current[name] = fits_j[name].best
-            _, (joint,) = self.runner.evaluate(eng, fits_j, self.ev, self.before_ssim, "joint refit")
+                without = [{k: v for k, v in cur.items() if k != name} for cur in currents]
+                fold_fits = self.fit_folds(without, [name], "joint refit")
+                for cur, fits in zip(currents, fold_fits):
+                    cur[name] = fits[name].best
+                params[name] = currents[-1][name]
+            # the last refitted effect added to the others: every chosen effect at its refitted values
+            specs = self.predict_folds(without, fold_fits, "joint refit")
+            _, (joint,) = self.runner.assess(fold_fits, specs, self.ev, self.before_ssim, "joint refit")
             ssim, mse, spec = joint.ssim, joint.mse, joint.spectrograms
-            self.selection.append({"step": "joint refit", "base": sorted(current), "candidates": [],
+            self.selection.append({"step": "joint refit", "base": sorted(currents[-1]), "candidates": [],
                                    "params": dict(params)})
         self.after_spec = spec
         self.after = {"effects": [c.effect for c in chosen], "ssim": float(ssim.mean()), "mse": float(mse.mean()),
@@ -469,7 +619,9 @@ class _Steps:
         self.ev_meta = {k: v[ev] for k, v in d.meta.items()}
         where = {"doppler_profile": [float(v) for v in dop], "time_profile": [float(v) for v in tim],
                  "by_factor": by_factor(self.before_ssim, self.ev_meta, FACTORS), "reflection_points": self.bones.result()}
-        self.report = {"format": FORMAT, "n_calibration": int(len(self.cal)), "n_evaluation": int(len(ev)),
+        # with folds, n_calibration is the fewest rows a fold's fits saw (module doc)
+        self.report = {"format": FORMAT, "n_calibration": int(min(len(f.train) for f in self.scored)),
+                       "n_evaluation": int(len(ev)),
                        "baseline": {"ssim": float(self.before_ssim.mean()), "mse": float(self.before_mse.mean()),
                                     "effects": {k: self.base_sim.effect(k).values() for k in self.base},
                                     "calibration": self.calibration},
@@ -481,19 +633,27 @@ class _Steps:
                        "excluded": self.runner.excluded,
                        "selection": self.selection,
                        "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
-                                    "fit_rows": int(len(self.fit_idx)), "refine_steps": cfg.refine_steps,
-                                    "rcs_exponents": self.exponents, "grids": cfg.grids or {},
-                                    "n_boot": cfg.n_boot, "min_gap_closed": cfg.min_gap_closed}}
+                                    "folds": cfg.folds, "fit_rows": int(len(self.folds[-1].fit_idx)),
+                                    "refine_steps": cfg.refine_steps, "rcs_exponents": self.exponents,
+                                    "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
+                                    "min_gap_closed": cfg.min_gap_closed}}
 
     def readout(self) -> None:
-        """How much a RadarWeightNet trained on the calibration rows closes (handradar.gap.rwn)."""
-        cfg = self.cfg
-        self.rwn_spec = None
+        """How much a RadarWeightNet trained on the readout fold's training rows closes on its held-out
+        rows (handradar.gap.rwn); with folds, fold 0's, against the candidates at fold 0's fits."""
+        cfg, f = self.cfg, self.rwn_fold
+        self.rwn_spec = self.rwn_rows = None
         if cfg.radarweightnet and self.features is not None and self.profiles is not None:
-            train_idx = _subset(self.data.labels, self.cal, cfg.rwn_rows, cfg.seed + 3)
+            pos = np.arange(len(f.test))  # the readout fold's rows come first in the evaluation arrays
+            cands = self.cands if len(self.folds) == 1 else [
+                c.on_rows(pos, self.before_ssim, c.fold_params[0]) for c in self.cands]
+            train_idx = _subset(self.data.labels, f.train, cfg.rwn_rows, cfg.seed + 3)
             self.report["radarweightnet"], self.rwn_spec = rwn_readout(
-                self.data, self.build, self.base, self.features, self.profiles, train_idx, self.ev, self.before_ssim,
-                self.cands, cfg, progress=self.progress)
+                self.data, f.build, f.base, self.features, self.profiles, train_idx, f.test, self.before_ssim[pos],
+                cands, cfg, progress=self.progress)
+            if len(self.folds) > 1:
+                self.report["radarweightnet"]["evaluation_rows"] = int(len(f.test))
+            self.rwn_rows = pos
 
 
 # The diagnosis, in order; each is a method of _Steps, and its wall time is reported under its name.
@@ -509,6 +669,9 @@ def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConf
         raise ValueError(f"unknown candidate effect(s) {unknown}; expected some of {sorted(REGISTRY)}")
     if not 0.0 < cfg.calibration_fraction < 1.0:
         raise ValueError(f"calibration_fraction must be in (0, 1), found {cfg.calibration_fraction}")
+    if isinstance(cfg.folds, bool) or not isinstance(cfg.folds, int) or cfg.folds < 1:
+        raise ValueError(f"diagnose.folds must be an integer >= 1 (1: one calibration/evaluation split), "
+                         f"found {cfg.folds!r}")
     with contextlib.ExitStack() as stack:
         if cache_dir is None and cfg.radarweightnet:
             cache_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="handradar-gap-"))
@@ -521,4 +684,5 @@ def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConf
             log.info("%s: %.1f s", name, timings[name])
         run.report["timings_s"] = timings
         return Diagnosis(run.report, run.cal, run.ev, data.measured[run.ev], run.base_spec,
-                         {c.effect: c.spectrograms for c in run.cands}, run.after_spec, run.rwn_spec, run.ev_meta)
+                         {c.effect: c.spectrograms for c in run.cands}, run.after_spec, run.rwn_spec, run.ev_meta,
+                         run.rwn_rows)

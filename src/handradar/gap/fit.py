@@ -4,9 +4,13 @@ their grids, then optional gradient steps.
     effect_grid(name, overrides=None) -> [{param: value}]
         the effect's documented grid (Effect.grid()), any parameter's values replaced by
         ``overrides[name][param]`` (bounds checked)
+    in_vocabulary_order(names) -> [name]
+        effect names in the vocabulary's order (handradar.vocab.EFFECTS), then any others sorted
     calibrate_rcs_exponent(build, base, rows, idx, measured, exponents) -> (best exponent, [mean SSIM])
         the aspect exponent of the cylinder RCS (handradar.sim.rcs) that makes the baseline simulator
         closest to the measured rows
+    fit_baseline_effects(build, base, rows, idx, measured, grids=None) -> (fitted base, {effect: GridFit})
+        the parameters of the effects already in the baseline, each on its grid given the others
     grid_fit(engine, candidates, idx, measured, grids=None) -> {effect: GridFit}
         one pass over the rows scores every grid point of every candidate (mean SSIM; a grid point
         whose spectrograms are not finite scores -inf)
@@ -17,7 +21,7 @@ their grids, then optional gradient steps.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +31,7 @@ from handradar.gap.engine import RowSet, VariantEngine, merge
 from handradar.metrics import fast_ssim_loss, per_example_ssim
 from handradar.sim.effects import REGISTRY
 from handradar.sim.factory import SimFactory
+from handradar.vocab import EFFECTS
 
 
 @dataclass
@@ -54,6 +59,12 @@ def effect_grid(name: str, overrides: Mapping[str, Mapping[str, Sequence[float]]
         raise ValueError(f"diagnose.grids.{err}") from None
 
 
+def in_vocabulary_order(names: Iterable[str]) -> list[str]:
+    """``names`` in the vocabulary's order (handradar.vocab.EFFECTS), then effects outside it sorted."""
+    names = set(names)
+    return [n for n in (*EFFECTS, *sorted(names - set(EFFECTS))) if n in names]
+
+
 def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:
     """Mean SSIM of simulated rows against measured ones; -inf when the simulation is not finite
     (a candidate that breaks the simulator must not win, nor make the ranking undefined)."""
@@ -73,6 +84,28 @@ def calibrate_rcs_exponent(build: SimFactory, base: Mapping, rows: RowSet, idx: 
         engine = VariantEngine(build.replace(rcs_exponent=float(e)), base, rows, batch_size=batch_size)
         scores.append(_mean_ssim(target, engine.spectrograms([{}], idx, progress=progress)[0]))
     return float(exponents[int(np.argmax(scores))]), scores
+
+
+def fit_baseline_effects(build: SimFactory, base: Mapping[str, Mapping[str, float]], rows: RowSet, idx: np.ndarray,
+                         measured: np.ndarray, *, grids: Mapping[str, Mapping[str, Sequence[float]]] | None = None,
+                         batch_size: int = 8, progress: Callable[[int], None] | None = None
+                         ) -> tuple[dict[str, dict[str, float]], dict[str, GridFit]]:
+    """The effects already in the baseline ``base`` fitted on rows ``idx``: each on its grid
+    (:func:`effect_grid`), the best point by mean SSIM, and the fitted baseline.
+
+    One coordinate pass in vocabulary order, not iterated to convergence: each effect's grid is
+    scored with the others at their current values (fitted for those before it, as given for those
+    after). That is enough for the usual baseline of one or two effects acting on different parts
+    of the spectrogram (a noise floor, an antenna pattern); effects that trade off against each
+    other would need more passes. No gradient refinement: grids only.
+    """
+    current = {k: dict(v) for k, v in base.items()}
+    fits: dict[str, GridFit] = {}
+    for name in in_vocabulary_order(current):
+        engine = VariantEngine(build, current, rows, batch_size=batch_size)
+        fits[name] = grid_fit(engine, [name], idx, measured, progress=progress, grids=grids)[name]
+        current[name] = dict(fits[name].best)
+    return current, fits
 
 
 def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, measured: np.ndarray,

@@ -12,12 +12,29 @@ def _params(p: dict) -> str:
 
 
 def _calibration(cal: dict | None) -> str:
-    """The baseline's generic calibration, as a clause of the baseline line."""
-    if not cal or not cal.get("grid"):
-        return " (the paper's cylinder RCS, not calibrated)"
-    tried = ", ".join(f"{g['rcs_exponent']:g}: {fmt_number(g['ssim'])}" for g in cal["grid"])
-    return (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
-            f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
+    """Step 0 (the RCS exponent, the baseline's own effects), as a clause of the baseline line."""
+    cal = cal or {}
+    if not cal.get("grid"):
+        text = " (the paper's cylinder RCS, not calibrated)"
+    else:
+        tried = ", ".join(f"{g['rcs_exponent']:g}: {fmt_number(g['ssim'])}" for g in cal["grid"])
+        text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
+                f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
+    if cal.get("effects"):
+        text += ("; the baseline's own effects fitted there on their grids: "
+                 + "; ".join(f"{k} {_params(v)}" for k, v in cal["effects"].items()))
+    return text
+
+
+def _rows(report: dict) -> str:
+    """The rows line: one calibration/evaluation split, or cross-fitting."""
+    folds = report.get("settings", {}).get("folds", 1)
+    if folds == 1:
+        return (f"- Rows: {report['n_calibration']} calibration (effect parameters are fitted here), "
+                f"{report['n_evaluation']} evaluation (every number below)")
+    return (f"- Rows: {report['n_evaluation']}, cross-fitted in {folds} folds: every row is scored (every number "
+            f"below) with parameters fitted on the other folds (at least {report['n_calibration']} rows); the "
+            "parameters shown are fitted on all rows")
 
 
 def _cause(cause: str, ev: dict) -> str:
@@ -45,9 +62,7 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
     if source:
         lines += [f"Data: `{source}`", ""]
     effects = ", ".join(base.get("effects", {})) or "none (the paper's model)"
-    lines += [f"- Baseline simulator effects: {effects}",
-              f"- Rows: {report['n_calibration']} calibration (effect parameters are fitted here), "
-              f"{report['n_evaluation']} evaluation (every number below)",
+    lines += [f"- Baseline simulator effects: {effects}", _rows(report),
               f"- Baseline: SSIM {fmt_number(base['ssim'])}, MSE {fmt_number(base['mse'], 5)}, gap = 1 - SSIM = {fmt_number(1 - base['ssim'])}"
               + _calibration(base.get("calibration")),
               _cause(report["cause"], ev),
@@ -107,7 +122,9 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
         corr = ", ".join(f"{k} {fmt_number(v, 2, True)}" for k, v in rwn.get("weight_correlation", {}).items() if v is not None)
         lines += ["## RadarWeightNet readout", "",
                   f"Trained {rwn['epochs']} epochs on {rwn['train_rows']} calibration rows (SSIM loss, cached slot "
-                  f"profiles): SSIM {fmt_number(rwn['ssim'])}, gap closed {fmt_number(rwn['gap_closed'], signed=True)} "
+                  f"profiles)" + (f", scored on the {rwn['evaluation_rows']} held-out rows of fold 0 (not cross-fitted)"
+                                  if "evaluation_rows" in rwn else "")
+                  + f": SSIM {fmt_number(rwn['ssim'])}, gap closed {fmt_number(rwn['gap_closed'], signed=True)} "
                   f"[{fmt_number(rwn['ci95'][0], signed=True)}, {fmt_number(rwn['ci95'][1], signed=True)}]."]
         if rwn.get("best_effect"):
             lines.append(f"Against the best physical effect ({rwn['best_effect']}, {fmt_number(rwn['best_effect_gap_closed'], signed=True)}): "

@@ -168,13 +168,16 @@ def diagnosis_figures(diagnosis, radar: RadarConfig, chain: ChainConfig, out_dir
     if diagnosis.candidates:
         figs["signatures"] = signature_figure(diagnosis.measured, diagnosis.baseline, diagnosis.candidates, rep,
                                               radar, chain, out / "signatures.png")
-    panels = {"baseline": diagnosis.baseline}
+    # examples from the rows every panel covers (RadarWeightNet's readout: one fold's rows with cross-fitting)
+    rows = diagnosis.rwn_rows if diagnosis.rwn is not None else np.arange(len(diagnosis.measured))
+    panels = {"baseline": diagnosis.baseline[rows]}
     if rep["after"]["effects"] and diagnosis.after is not None:
-        panels["after: " + "+".join(rep["after"]["effects"])] = diagnosis.after
+        panels["after: " + "+".join(rep["after"]["effects"])] = diagnosis.after[rows]
     if diagnosis.rwn is not None:
         panels["RadarWeightNet"] = diagnosis.rwn
-    ssim = {k: per_example_ssim(diagnosis.measured, v) for k, v in panels.items()}
-    figs["examples"] = example_figure(diagnosis.measured, panels, ssim, rep.get("settings", {}).get("n_examples", 4),
+    measured = diagnosis.measured[rows]
+    ssim = {k: per_example_ssim(measured, v) for k, v in panels.items()}
+    figs["examples"] = example_figure(measured, panels, ssim, rep.get("settings", {}).get("n_examples", 4),
                                       out / "examples.png")
     return figs
 

@@ -1,0 +1,144 @@
+"""Cross-fitting (``diagnose.folds``): folds = 1 is the single calibration/evaluation split, number for
+number; k folds score every row out of fold, name the effect that is there, and refuse a k the classes
+cannot fill."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from handradar.gap.diagnosis import (
+    Candidate,
+    Diagnosis,
+    DiagnosisConfig,
+    _evidence,
+    cross_folds,
+    diagnose,
+)
+from handradar.gap.fit import GridFit
+from handradar.gap.job import write_outputs
+from handradar.gap.report import validate_report
+from tests.gap.conftest import builder, gap_data
+
+# the report of single_split_run() written by the code before cross-fitting (commit 0a8a427):
+# PYTHONPATH=src:. python -m tests.gap.test_crossfit
+GOLDEN = Path(__file__).parent / "golden" / "single_split_report.json"
+
+
+def single_split_run(radar, chain, **kw) -> Diagnosis:
+    """A small diagnosis that goes through every step: a baseline effect fitted in step 0, the RCS
+    exponent, gradient refinement, two effects chosen and refitted jointly, the RadarWeightNet readout."""
+    data = gap_data(radar, chain, 16, {"antenna_pattern": {"q": 8.0}, "sync_offset": {"offset_s": 0.05},
+                                       "noise": {"snr_db": 10.0}}, seed=5)
+    cfg = DiagnosisConfig(candidates=["antenna_pattern", "sync_offset", "palm"], n_boot=300, fit_rows=6,
+                          refine_steps=2, refine_rows=4, rwn_epochs=1, rwn_hidden=16, rcs_exponents=[1.0, 0.5], **kw)
+    return diagnose(data, builder(radar, chain), {"noise": {}}, cfg, progress=False)
+
+
+def _comparable(report: dict) -> dict:
+    return {k: v for k, v in report.items() if k != "timings_s"}
+
+
+def _assert_same(got, want, where: str = "report") -> None:
+    """Equal structure, equal strings and integers, floats equal to 1e-6 relative (other torch builds)."""
+    if isinstance(want, dict):
+        assert isinstance(got, dict) and set(got) == set(want), f"{where}: keys {sorted(got)} != {sorted(want)}"
+        for k in want:
+            _assert_same(got[k], want[k], f"{where}.{k}")
+    elif isinstance(want, list):
+        assert isinstance(got, list) and len(got) == len(want), f"{where}: length {len(got)} != {len(want)}"
+        for i, (g, w) in enumerate(zip(got, want)):
+            _assert_same(g, w, f"{where}[{i}]")
+    elif isinstance(want, float) and not isinstance(got, bool):
+        assert got == pytest.approx(want, rel=1e-6, abs=1e-9, nan_ok=True), f"{where}: {got} != {want}"
+    else:
+        assert got == want, f"{where}: {got!r} != {want!r}"
+
+
+def test_one_fold_is_the_single_split_number_for_number(radar, short_chain):
+    got = json.loads(json.dumps(_comparable(single_split_run(radar, short_chain, folds=1).report)))
+    want = json.loads(GOLDEN.read_text())
+    assert got["settings"].pop("folds") == 1  # the one new key
+    _assert_same(got, want)
+    assert want["cause"] == "sync_offset" and want["after"]["effects"] == ["sync_offset", "antenna_pattern"]
+    assert all("fold_params" not in c for c in got["candidates"]) and "folds" not in got["baseline"]["calibration"]
+
+
+CANDIDATES = ["antenna_pattern", "palm", "noise"]
+
+
+def test_three_folds_score_every_row_out_of_fold_and_name_the_effect(radar, short_chain, tmp_path):
+    # 24 rows, 6 per class: one split evaluates 12 of them, three folds all 24
+    data = gap_data(radar, short_chain, 24, {"antenna_pattern": {"q": 6.0}}, seed=1)
+    kw = {"candidates": CANDIDATES, "n_boot": 500, "rcs_exponents": [1.0, 0.5], "rwn_epochs": 1, "rwn_hidden": 16}
+    one = diagnose(data, builder(radar, short_chain), {}, DiagnosisConfig(radarweightnet=False, **kw),
+                   progress=False).report
+    d = diagnose(data, builder(radar, short_chain), {}, DiagnosisConfig(folds=3, **kw), progress=False)
+    rep = d.report
+    validate_report(rep, n_columns=short_chain.n_columns)
+    assert one["cause"] == rep["cause"] == "antenna_pattern" and rep["after"]["effects"] == ["antenna_pattern"]
+    assert rep["n_evaluation"] == len(data) == 24 and one["n_evaluation"] == 12
+    assert np.array_equal(np.sort(d.evaluation), np.arange(24))  # every row scored once
+    assert rep["n_calibration"] == 16 and rep["settings"]["folds"] == 3  # each fold's fits saw the 16 other rows
+    top = rep["candidates"][0]
+    assert top["effect"] == "antenna_pattern" and len(top["fold_params"]) == 3
+    assert all(p["q"] in (4.0, 8.0) for p in top["fold_params"])  # the grid points around the true 6
+    assert rep["after"]["params"]["antenna_pattern"] == top["params"]  # the all-rows fit
+    assert len(rep["baseline"]["calibration"]["folds"]) == 3
+    # twice the evaluation rows: narrower CIs (about 1/sqrt(2)), or at least comparable ones
+    width = {k: r["candidates"][0]["ci95"][1] - r["candidates"][0]["ci95"][0] for k, r in ((1, one), (3, rep))}
+    assert width[3] <= 1.1 * width[1]
+    # the RadarWeightNet readout stays on fold 0: its rows only, in the report and the figures
+    rwn = rep["radarweightnet"]
+    assert rwn["evaluation_rows"] == 8 and d.rwn.shape[0] == len(d.rwn_rows) == 8
+    paths = write_outputs(d, tmp_path, radar, short_chain)
+    md = paths["md"].read_text()
+    assert "cross-fitted in 3 folds" in md and "held-out rows of fold 0" in md and paths["examples"].is_file()
+
+
+@pytest.mark.parametrize("folds, message", [(0, "integer >= 1"), (-2, "integer >= 1"), (2.0, "integer >= 1"),
+                                            (7, "exceeds the 6 rows of class")])
+def test_invalid_folds_are_refused(radar, short_chain, folds, message):
+    data = gap_data(radar, short_chain, 24, {}, seed=1)  # 6 rows of each of 4 classes
+    with pytest.raises(ValueError, match=message):
+        diagnose(data, builder(radar, short_chain), {}, {"folds": folds, "radarweightnet": False}, progress=False)
+
+
+def test_cross_folds_are_stratified_disjoint_and_seeded():
+    labels = np.repeat(np.arange(3), [6, 4, 3])
+    parts = cross_folds(labels, 3, seed=0)
+    assert np.array_equal(np.sort(np.concatenate(parts)), np.arange(labels.size))
+    assert all(set(labels[p]) == {0, 1, 2} for p in parts)  # every fold holds every class
+    assert all(np.array_equal(a, b) for a, b in zip(parts, cross_folds(labels, 3, seed=0)))
+    with pytest.raises(ValueError, match="at most 3 folds"):
+        cross_folds(labels, 4, seed=0)
+
+
+def test_cross_fitted_recordings_needed_are_evaluation_rows():
+    # every recording is an evaluation row: an inconclusive verdict asks for that many recordings
+    rng = np.random.default_rng(0)
+    before = rng.uniform(0.8, 0.9, 60)
+    ssim = before + 0.03 * (1.0 - before) + rng.normal(0.0, 0.01, before.shape)
+    lead = Candidate("palm", {}, GridFit("palm", [], []), ssim, np.zeros_like(ssim), 0.03, (-0.02, 0.08))
+    _, ev = _evidence(before, [lead], DiagnosisConfig(folds=3))
+    assert ev["evaluation_rows_needed"] == ev["recordings_needed"] == 167  # 60 * (5/3)^2 = 166.7
+    _, single = _evidence(before, [lead], DiagnosisConfig())
+    assert single["recordings_needed"] == 334  # / (1 - calibration_fraction 0.5)
+
+
+if __name__ == "__main__":
+    import dataclasses
+
+    import torch
+
+    from handradar.radar.chain import ChainConfig
+    from handradar.radar.config import RadarConfig
+    from tests.conftest import DEFAULT_CFG
+
+    torch.set_num_threads(1)
+    radar = RadarConfig.from_cfg_text(DEFAULT_CFG, "default.cfg")
+    chain = dataclasses.replace(ChainConfig(), n_columns=8)  # the short_chain fixture
+    GOLDEN.write_text(json.dumps(_comparable(single_split_run(radar, chain).report), indent=1) + "\n")
