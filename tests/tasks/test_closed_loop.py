@@ -33,7 +33,9 @@ def _measured(path: Path, radar, chain, per_class: int) -> Path:
     sk, masks, labels = [], [], []
     for i in range(per_class * len(CLASSES)):
         c = i % len(CLASSES)
-        p, m = window(times, hands=2 if c == 2 else 1, seed=i, amplitude_rad=0.25 if c == 0 else 0.8,
+        # three motions: fingers barely flexing, a wide flex while the hand approaches, two hands
+        p, m = window(times, hands=2 if c == 2 else 1, seed=i, amplitude_rad=(0.15, 1.0, 0.5)[c],
+                      drift_m_s=(0.0, 0.0, -0.15 if c == 1 else 0.0),
                       centre=(rng.uniform(-0.05, 0.05), -0.06, rng.uniform(0.25, 0.35)))
         # tracker jitter on the stored skeleton: 2 mm, independent per step
         sk.append(p + rng.normal(0.0, 0.002, p.shape).astype(np.float32) * m[..., None, None])
@@ -60,7 +62,7 @@ def test_fitted_simulator_recovers_smoothing_and_offset_and_synthetic_only_learn
         f"paths.cache_dir={tmp_path}/cache", "logger=none", "print_table=false", "checkpoint_interval_s=0",
         "skeleton_rate_hz=100.0", "split.fraction=1.0", "split.test_fraction=0.25",
         "variants=[model_synth_only]", "model.net._target_=tests.tasks.fakes.tiny_cnn", "~model.net.stem_stride",
-        "trainer.max_steps=60", "trainer.enable_progress_bar=false",
+        "trainer.max_steps=150", "trainer.enable_progress_bar=false",
         "synth.fit_sim=effects", "+synth.fit.candidates=[sync_offset,tracking_jitter,noise]",
         "+synth.fit.rcs_exponents=[1.0]", "synth.fit.n_boot=300"])
     run_dir = run(cfg, tmp_path / "run")
