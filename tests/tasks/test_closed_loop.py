@@ -16,8 +16,10 @@ import torch
 from omegaconf import OmegaConf
 
 from handradar.data.hdf5 import open_writer
+from handradar.gap.job import fit_simulator
 from handradar.sim.factory import SimFactory
 from handradar.tasks.train import nuisance_draw, run
+from tests.gap.conftest import gap_data
 from tests.sim.demo import window
 from tests.tasks.fakes import compose_train
 
@@ -73,6 +75,15 @@ def test_fitted_simulator_recovers_smoothing_and_offset_and_synthetic_only_learn
     assert fitted["effect_params"]["tracking_jitter"]["sigma_s"] == pytest.approx(0.02, abs=1e-6)
     metrics = OmegaConf.to_container(OmegaConf.load(run_dir / "metrics.json"))
     assert metrics["test/acc_model_synth_only"] >= 0.6  # 3 classes, 12 test rows: chance 0.33
+
+
+def test_calibration_only_fit_keeps_no_effect(radar, short_chain):
+    """synth.fit_sim=calibrate: step 0 alone; the fitted simulator has the calibrated exponent, no effect."""
+    data = gap_data(radar, short_chain, 16, {"antenna_pattern": {"q": 8.0}})
+    diag, settings = fit_simulator(data, {"rcs_exponent": 1.0}, {"rcs_exponents": [1.0, 0.5], "radarweightnet": False,
+                                                                  "n_boot": 200}, effects=False)
+    assert settings["effects"] == [] and diag.report["candidates"] == []
+    assert settings["rcs_exponent"] in (1.0, 0.5) and diag.report["cause"] == "none"
 
 
 def test_nuisance_draws_stay_within_bounds_and_leave_absent_effects_alone():

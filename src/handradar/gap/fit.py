@@ -117,6 +117,8 @@ def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, 
         for point in effect_grid(name, grids):
             variants.append({name: point})
             owners.append(name)
+    if not variants:  # no candidate (e.g. a calibration-only fit)
+        return {}
     specs = engine.spectrograms(variants, idx, progress=progress)
     target = torch.as_tensor(measured[idx])
     fits = {name: GridFit(name, [], []) for name in candidates}
