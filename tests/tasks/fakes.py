@@ -161,6 +161,7 @@ def fake_overrides(data: Path, tmp: Path, *, logger: str = "none", extra: tuple[
             "~synth.provider.sim", "~synth.provider.phases", "synth.provider._target_=tests.tasks.fakes.fake_provider",
             "~synth.external_provider.radar", "~synth.external_provider.chain", "~synth.external_provider.sim",
             "synth.external_provider._target_=tests.tasks.fakes.fake_external_provider",
+            "synth.fit_sim=none",  # fake skeletons cannot be simulated (tests/tasks/test_closed_loop.py fits)
             f"logger={logger}", "checkpoint_interval_s=0", "trainer.max_steps=20", "cgan.max_steps=20", "print_table=false",
             *extra]
 
