@@ -14,7 +14,10 @@ same + one synthetic spectrogram per pool row, i.e. every non-test skeleton, fro
 in mode ``model`` / ``enhanced``), ``cgan`` (the same + CGAN samples, as many per class as the pool
 has rows); the transfer variants ``model_synth_only`` / ``synth_only`` train on those synthetic
 spectrograms alone (train on synthetic, test on real) and ``radar_pool`` on the pool's real
-spectrograms (their upper reference). ``external_pretrain`` pre-trains on ``synth.external_provider`` data and fine-tunes on
+spectrograms (their upper reference). The simulator behind the synthetic variants is fitted on the
+split's real training rows first (``synth.fit_sim``, the closed loop: :meth:`Job.fitted_sim` through
+handradar.gap.job.fit_simulator), optionally drawn ``synth.samples_per_row`` times around its fitted
+nuisance parameters (``synth.randomize``, :func:`nuisance_draw`). ``external_pretrain`` pre-trains on ``synth.external_provider`` data and fine-tunes on
 few-shot fractions of class subsets, against the same training from scratch. Any other job kind is
 a dotted function name ``fn(job: Job) -> {metric name: number}`` (e.g. a synthesis-fit job): it gets
 the loaded real data (``job.real``), the state folder (``job.state``, for resumable work), the
