@@ -14,7 +14,7 @@ Public API:
     fit_simulator(data, sim_settings, diagnose_settings, *, cache_dir=None, effects=True,
                   progress=False) -> (Diagnosis, fitted sim settings)
                                            the one fitting path (diagnose.py and train.py's synth.fit_sim)
-    write_outputs(diagnosis, out_dir, radar, chain, source="") -> {"json", "md", figures...}
+    write_outputs(diagnosis, out_dir, radar, chain, source="", fitted=None) -> {"json", "md", figures...}
 """
 
 from __future__ import annotations
@@ -44,9 +44,10 @@ log = logging.getLogger(__name__)
 
 
 def write_outputs(diagnosis: Diagnosis, out_dir: str | Path, radar: RadarConfig, chain: ChainConfig,
-                  source: str = "", sim_settings: Mapping | None = None) -> dict[str, Path]:
-    """gap_report.json (validated), fitted_sim.yaml (the fitted simulator's ``sim`` settings, from the
-    baseline's ``sim_settings``), figures/*.png and gap_report.md in ``out_dir``."""
+                  source: str = "", fitted: Mapping | None = None) -> dict[str, Path]:
+    """gap_report.json (validated), fitted_sim.yaml (``fitted``, the fitted simulator's ``sim`` settings
+    from :func:`fit_simulator`; None: derived from the report alone), figures/*.png and gap_report.md
+    in ``out_dir``."""
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -54,7 +55,8 @@ def write_outputs(diagnosis: Diagnosis, out_dir: str | Path, radar: RadarConfig,
                                   n_columns=chain.n_columns)}
     # the fitted simulator, for train.py / handradar-synth: sim=fitted sim.from_report=<this file>
     paths["sim"] = out / "fitted_sim.yaml"
-    atomic_write_text(paths["sim"], OmegaConf.to_yaml(fitted_simulator(diagnosis.report, sim_settings)))
+    atomic_write_text(paths["sim"], OmegaConf.to_yaml(dict(fitted) if fitted is not None
+                                                        else fitted_simulator(diagnosis.report)))
     figs = diagnosis_figures(diagnosis, radar, chain, out / "figures")
     md = out / "gap_report.md"
     atomic_write_text(md, render(diagnosis.report, figs, out, source) + "\n")
@@ -110,9 +112,9 @@ def run(cfg: DictConfig) -> Path:
     ref = DataRef.of(OmegaConf.to_container(cfg.data, resolve=True), path, tags["data_hash"])
     with tracked_run(tracker, run_name=ref.run_name(cfg.task_name, cfg.diagnose.seed), tags=tags,
                      config=OmegaConf.to_container(cfg, resolve=True), dataset=ref):
-        diag, _ = fit_simulator(data, sim_settings, OmegaConf.to_container(cfg.diagnose, resolve=True),
+        diag, fitted = fit_simulator(data, sim_settings, OmegaConf.to_container(cfg.diagnose, resolve=True),
                                 cache_dir=Path(cfg.paths.cache_dir) / "gap", progress=bool(cfg.get("progress", True)))
-        paths = write_outputs(diag, out, radar, chain, str(path), sim_settings)
+        paths = write_outputs(diag, out, radar, chain, str(path), fitted)
         tracker.log_metrics(headline_metrics(diag.report))
         tracker.set_tags({f"{TAG_PREFIX}cause": diag.report["cause"]})
         for name, p in paths.items():

@@ -61,6 +61,7 @@ from handradar.data.hdf5 import read_attrs
 from handradar.data.splits import Split, few_shot_split, make_split
 from handradar.gap.data import load_dataset
 from handradar.gap.job import fit_simulator
+from handradar.gap.report import write_report
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import code_version, config_hash
 from handradar.runs.mlflow import DataRef, Tracker, flatten, tracked_run
@@ -362,7 +363,8 @@ class Job:
         diag, settings = fit_simulator(data, OmegaConf.to_container(self.cfg.sim, resolve=True), fit_cfg,
                                        cache_dir=Path(self.cfg.synth.cache_dir) / "fit", effects=mode == "effects")
         if self.rank_zero:
-            atomic_write_text(self.state / "fit_report.json", json.dumps(diag.report, indent=1))
+            write_report(self.state / "fit_report.json", diag.report, n_doppler=data.chain.stft_len,
+                         n_columns=data.chain.n_columns)
             atomic_write_text(f, OmegaConf.to_yaml(settings))
             self.tracker.log_artifact(f, "synthesis")
             self.tracker.log_artifact(self.state / "fit_report.json", "synthesis")
