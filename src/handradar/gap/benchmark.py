@@ -6,8 +6,9 @@ of the preset, normally none); ``nothing``: a world with no vocabulary effect (t
 is "none"); ``iq_imbalance``: a world whose only effect is outside the vocabulary ("none" again).
 An "inconclusive" answer is wrong in every case: a withheld effect is there to be named, a control
 has none to be shown.
-The world's other settings (``benchmark.world``, keys of handradar.world.WorldConfig) are shared by
-every case; ``benchmark.strengths`` ({effect: {param: value}}) sets the withheld effect's own
+The world's other settings are shared by every case: the ``world`` config group (``world=heldout``
+runs the benchmark on another world's physics) with ``benchmark.world`` (keys of
+handradar.world.WorldConfig) on top; ``benchmark.strengths`` ({effect: {param: value}}) sets the withheld effect's own
 parameters in its case (an effect must change the radar data to cause a gap at all: see the radar
 signature column). Each case's dataset is built once by ``benchmark.builder`` (cached by config hash)
 and diagnosed by exactly the code diagnose.py runs on recordings; its report is kept in the run
@@ -262,7 +263,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     out = Path(out_dir)
     radar, chain = instantiate(cfg.radar), instantiate(cfg.chain)
     build_world = get_method(str(bench.builder))
-    world = OmegaConf.to_container(bench.world, resolve=True) if bench.get("world") is not None else {}
+    # the shared world: the `world` group (world=heldout: other physics) with benchmark.world on top
+    world = OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}), resolve=True)
     strengths = OmegaConf.to_container(bench.strengths, resolve=True) if bench.get("strengths") is not None else {}
     diag_cfg = OmegaConf.to_container(cfg.diagnose, resolve=True)
     sim_cfg = OmegaConf.to_container(cfg.sim, resolve=True)
@@ -311,7 +313,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         scores = score(results)
         figures_dir, md_path = Path(bench.figures_dir), Path(bench.results_md)
         fig = confusion_figure(np.asarray(scores["matrix"]), [f"{r['case']} ({r['truth']})" for r in results],
-                               scores["labels"], figures_dir / "gap_confusion.png",
+                               scores["labels"], figures_dir / str(bench.get("figure", "gap_confusion.png")),
                                title=f"Gap benchmark: {scores['effects_correct']}/{scores['effects_total']} effects, "
                                      f"{scores['controls_correct']}/{scores['controls_total']} controls")
         import torch
