@@ -128,6 +128,7 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
         "paths": {"cache_dir": str(tmp_path / "cache")},
         "sim": {"_target_": "handradar.sim.simulator.Simulator", "_partial_": True, "effects": [], "effect_params": {}},
         "diagnose": {"candidates": ["antenna_pattern", "palm"], "radarweightnet": False, "n_boot": 300, "greedy_max": 1},
+        "world": {"seed": 7, "subjects": 3},  # the world group: benchmark.world goes on top
         "benchmark": {"builder": "tests.gap.test_benchmark.fake_world",
                       "cases": ["antenna_pattern", "nothing"], "world": {"subjects": 1}, "layout_turn": 0.5,
                       "state_dir": str(tmp_path / "state"), "figures_dir": str(tmp_path / "docs" / "figures"),
@@ -142,7 +143,7 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
     assert "| antenna_pattern | antenna_pattern | antenna_pattern | yes |" in md.read_text()
     assert (tmp_path / "run" / "cases" / "antenna_pattern" / "gap_report.json").is_file()
     # 2 cases + the effect-free world once, + the oracle's turned worlds (antenna_pattern, effect-free)
-    assert len(CALLS) == 5 and all(c["subjects"] == 1 for c in CALLS)
+    assert len(CALLS) == 5 and all(c["subjects"] == 1 and c["seed"] == 7 for c in CALLS)
     assert sum(c.get("scene", {}).get("facet_turn") == 0.5 for c in CALLS) == 2
     assert by["nothing"]["signature_mean"] < 1e-6 < by["antenna_pattern"]["signature_mean"]
     assert by["antenna_pattern"]["oracle_ci95"][0] > 0 and by["nothing"].get("oracle_gap_closed") is None

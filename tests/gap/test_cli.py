@@ -45,6 +45,12 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     assert b.benchmark.builder == "handradar.world.build_world_dataset"
     assert len(b.benchmark.cases) == 10 and {"nothing", "iq_imbalance"} <= set(b.benchmark.cases)
     assert SimFactory.from_config(b.sim, radar, chain)({}).hand.sections == 10  # the preset's coarser visibility mesh
+    # the held-out preset: the same frozen diagnosis on the held-out world's physics
+    h = _compose(["+experiment=gap_benchmark_heldout"])
+    OmegaConf.resolve(h)
+    assert h.diagnose == b.diagnose and h.sim == b.sim and h.hand == b.hand and h.benchmark.cases == b.benchmark.cases
+    assert h.world.seed != b.world.seed and h.world.scene != b.world.scene and h.world.effects != b.world.effects
+    assert h.benchmark.results_md.endswith("gap_benchmark_heldout.md") and h.benchmark.figure != b.benchmark.figure
 
 
 @pytest.mark.slow
