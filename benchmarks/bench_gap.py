@@ -19,10 +19,12 @@ import time
 from pathlib import Path
 
 import torch
+from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from benchmarks.common import Result
+from handradar.config import VERSION_BASE, config_dir
 from handradar.data.ingest import ingest
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
@@ -54,7 +56,8 @@ def run() -> list[Result]:
     torch.set_num_threads(threads)
     root = recordings()
     chain = instantiate(_conf("chain/default"))
-    sim_cfg = OmegaConf.merge(_conf("sim/paper"), {"hand": _conf("hand/default")})
+    with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
+        sim_cfg = compose("diagnose", overrides=["data.root=/unused"]).sim  # the paper's simulator, as diagnose.py has it
     diag_cfg = OmegaConf.to_container(_conf("diagnose").diagnose, resolve=True)
     out: list[Result] = []
     with tempfile.TemporaryDirectory() as tmp:
