@@ -20,7 +20,8 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
 3. which: every effect not in the baseline is a candidate; its parameters are fitted on the
    calibration split only (the documented grid, Effect.grid(), or ``grids``; then optional gradient
    steps for ``fit == "grad"``); its gap_closed on the evaluation split gets a paired-bootstrap 95 % CI,
-   and the change it makes is correlated with the baseline residual (its signature);
+   and the change it makes is correlated with the baseline residual (its signature), and its per-row gain
+   with the factor its physics acts through (its specificity: handradar.gap.specificity; evidence only);
    ``cause`` (:func:`decide`; its numbers: report key ``evidence``) has three outcomes:
    the leading candidate when its CI excludes 0, its gap_closed is at least ``min_gap_closed``,
    and the paired bootstrap of its lead over the runner-up excludes 0; "none" when the upper end
@@ -91,6 +92,7 @@ from handradar.gap.fit import (
 )
 from handradar.gap.report import FACTORS, FORMAT
 from handradar.gap.rwn import rwn_readout
+from handradar.gap.specificity import row_factors, specificity
 from handradar.gap.where import (
     BoneResiduals,
     by_factor,
@@ -626,7 +628,7 @@ class _Steps:
                                     "effects": {k: self.base_sim.effect(k).values() for k in self.base},
                                     "calibration": self.calibration},
                        "where": where,
-                       "candidates": [c.entry(cfg.min_gap_closed) for c in self.cands],
+                       "candidates": self.candidate_entries(),
                        "cause": self.cause,
                        "after": self.after,
                        "evidence": self.evidence,
@@ -637,6 +639,18 @@ class _Steps:
                                     "refine_steps": cfg.refine_steps, "rcs_exponents": self.exponents,
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
                                     "min_gap_closed": cfg.min_gap_closed}}
+
+    def candidate_entries(self) -> list[dict]:
+        """The report's candidates, each with its specificity evidence where its physics names a factor."""
+        factors = row_factors(self.data.rows.take(self.ev))
+        out = []
+        for c in self.cands:
+            e = c.entry(self.cfg.min_gap_closed)
+            sp = specificity(c.effect, c.ssim - self.before_ssim, factors, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
+            if sp is not None:
+                e["specificity"] = sp
+            out.append(e)
+        return out
 
     def readout(self) -> None:
         """How much a RadarWeightNet trained on the readout fold's training rows closes on its held-out

@@ -89,13 +89,19 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
         if "bones" in rel:
             lines += [f"![bones]({rel['bones']})", ""]
     lines += ["## Which", "",
-              "| effect | fitted parameters | SSIM | gap_closed | 95 % CI | significant | signature r |",
-              "|---|---|---|---|---|---|---|"]
+              "| effect | fitted parameters | SSIM | gap_closed | 95 % CI | significant | signature r "
+              "| where its physics acts: gain high - low [95 % CI] |",
+              "|---|---|---|---|---|---|---|---|"]
     for c in report["candidates"]:
+        sp = c.get("specificity")
+        spec = "-" if not sp else (f"{fmt_number(sp['contrast'], signed=True)} [{fmt_number(sp['ci95'][0], signed=True)}, "
+                                   f"{fmt_number(sp['ci95'][1], signed=True)}] ({sp['factor']})")
         lines.append(f"| {c['effect']} | {_params(c['params'])} | {fmt_number(c['ssim'])} | {fmt_number(c['gap_closed'], signed=True)} | "
                      f"[{fmt_number(c['ci95'][0], signed=True)}, {fmt_number(c['ci95'][1], signed=True)}] | "
-                     f"{'yes' if c.get('significant') else 'no'} | {fmt_number(c.get('signature_correlation'), 2, True)} |")
-    lines.append("")
+                     f"{'yes' if c.get('significant') else 'no'} | {fmt_number(c.get('signature_correlation'), 2, True)} | {spec} |")
+    lines += ["", "The last column is specificity evidence (handradar.gap.specificity; not part of the rule): "
+                  "an effect's mean per-row gain where the factor its physics acts through is high minus where it "
+                  "is low, factors from the skeletons. Near 0, the candidate closes a generic gap.", ""]
     if ev:
         lines += [f"Rule: {ev.get('rule', '')}.", ""]
         if ev.get("leader"):

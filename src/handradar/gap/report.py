@@ -74,6 +74,14 @@ def validate_report(report: dict, *, n_doppler: int = 64, n_columns: int = 32) -
         ci = c.get("ci95")
         if not isinstance(ci, list) or len(ci) != 2 or not ci[0] <= ci[1]:
             raise ReportError(f"{w}.ci95 must be [low, high] with low <= high, found {ci!r}")
+        sp = c.get("specificity")
+        if sp is not None:  # optional evidence (handradar.gap.specificity)
+            if not isinstance(sp, dict) or not isinstance(sp.get("factor"), str):
+                raise ReportError(f"{w}.specificity must be an object with a 'factor' (string)")
+            _number(sp, "contrast", f"{w}.specificity")
+            sci = sp.get("ci95")
+            if not isinstance(sci, list) or len(sci) != 2 or not sci[0] <= sci[1]:
+                raise ReportError(f"{w}.specificity.ci95 must be [low, high] with low <= high, found {sci!r}")
         names.append(c["effect"])
     if len(set(names)) != len(names):
         raise ReportError(f"candidates must name each effect once, found {names}")
