@@ -112,6 +112,77 @@ def test_range_response_is_differentiable():
     torch.autograd.gradcheck(lambda x: torch.view_as_real(range_response(x, bins, 32, "hann")), (nu,))
 
 
+def _range_response_reference(nu, bins, n, window_name):
+    """The term-by-term form range_response had before the factorisation (one Dirichlet kernel per
+    window term and bin), kept as the reference of the fast form."""
+    from handradar.radar.chain import COSINE_WINDOWS, dirichlet
+
+    nu = nu.unsqueeze(-1) - bins.to(nu.dtype) / n
+    out = 0
+    for m, a in enumerate(COSINE_WINDOWS[window_name]):
+        if m == 0:
+            out = out + a * dirichlet(nu, n)
+        else:
+            out = out + ((-1) ** m) * a / 2 * (dirichlet(nu + m / n, n) + dirichlet(nu - m / n, n))
+    return out
+
+
+@pytest.mark.parametrize("window_name", ["rect", "hann", "hamming", "blackman"])
+def test_factored_range_response_equals_the_term_by_term_form(window_name):
+    n = 256
+    gen = torch.Generator().manual_seed(0)
+    nu = torch.rand(4000, generator=gen, dtype=torch.float64) * 1.6 - 0.3  # aliased and negative beats too
+    poles = torch.arange(-3, 14, dtype=torch.float64) / n  # the bins' and side lobes' poles (and aliases)
+    nu[:17], nu[17:34] = poles, poles + 1.0  # exactly on a pole
+    nu[34:51] = poles + 1e-8 * torch.randn(17, generator=gen, dtype=torch.float64)  # the pole limit
+    nu[51:68] = poles + 4e-7 * torch.randn(17, generator=gen, dtype=torch.float64)  # just outside it
+    nu = nu.reshape(2, 50, 40)
+    bins = torch.arange(2, 10)
+    ref = _range_response_reference(nu, bins, n, window_name)
+    fast = range_response(nu, bins, n, window_name)
+    assert fast.shape == ref.shape == (2, 50, 40, 8) and fast.dtype == torch.complex128
+    scale = ref.abs().max()
+    assert float((fast - ref).abs().max() / scale) < 1e-10
+    # float32 beats: complex64 out, float32 round-off of the old float32 evaluation
+    ref32 = _range_response_reference(nu.float(), bins, n, window_name)
+    fast32 = range_response(nu.float(), bins, n, window_name)
+    assert fast32.dtype == torch.complex64
+    assert float((fast32 - ref32).abs().max() / scale) < 2e-6
+    # a carrier multiplies each tone (poles included)
+    carrier = torch.polar(torch.rand(nu.shape, generator=gen, dtype=torch.float64),
+                          torch.rand(nu.shape, generator=gen, dtype=torch.float64) * 100.0)
+    torch.testing.assert_close(range_response(nu, bins, n, window_name, carrier), ref * carrier[..., None],
+                               atol=1e-10 * float(scale), rtol=0)
+    # bins that are not integers go through the term-by-term form
+    frac_bins = torch.tensor([2.5, 3.0])
+    torch.testing.assert_close(range_response(nu, frac_bins, n, window_name),
+                               _range_response_reference(nu, frac_bins, n, window_name), atol=0, rtol=0)
+
+
+def test_range_response_chunks_change_nothing(monkeypatch):
+    import handradar.radar.chain as chain_module
+
+    gen = torch.Generator().manual_seed(1)
+    nu = torch.rand(3, 1000, generator=gen, dtype=torch.float64)
+    nu[0, :5] = torch.arange(5) / 64.0  # poles in the first chunk
+    carrier = torch.polar(torch.ones_like(nu), nu * 50.0)
+    bins = torch.arange(1, 7)
+    whole = range_response(nu, bins, 64, "hann", carrier)
+    monkeypatch.setattr(chain_module, "_RESPONSE_CHUNK", 333)
+    # the same sums (BLAS may block a shorter matmul differently: round-off only)
+    torch.testing.assert_close(range_response(nu, bins, 64, "hann", carrier), whole,
+                               atol=1e-13 * float(whole.abs().max()), rtol=0)
+    x = nu[:, 10:50].clone().requires_grad_(True)  # the differentiable path concatenates its chunks
+    monkeypatch.setattr(chain_module, "_RESPONSE_CHUNK", 7)
+    torch.autograd.gradcheck(lambda v: torch.view_as_real(range_response(v, bins, 64, "hann")), (x,))
+
+
+def test_range_response_gradient_near_a_pole():
+    nu = torch.tensor([3.0 / 32 + 1e-4, 0.2, 5.0 / 32 - 2e-3], dtype=torch.float64, requires_grad=True)
+    bins = torch.arange(0, 8)
+    torch.autograd.gradcheck(lambda x: torch.view_as_real(range_response(x, bins, 32, "blackman")), (nu,))
+
+
 def test_static_clutter_is_removed(radar, chain):
     static = point_target_adc(radar, 16, 0.30, 0.0, amplitude=20000.0)
     moving = point_target_adc(radar, 16, 0.50, -0.3, amplitude=200.0)

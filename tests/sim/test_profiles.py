@@ -144,6 +144,35 @@ def test_simulator_uses_the_shared_chain_and_is_batch_consistent(radar, short_ch
     assert float(prof[0, 19:38].abs().max()) == 0.0 and float(prof[1, 19:38].abs().max()) > 0
 
 
+def test_silent_points_are_skipped_without_changing_the_profiles(radar, short_chain):
+    """Without autograd, points of zero amplitude at every chirp (an untracked hand) are left out of
+    the range response; the profiles are those of the full evaluation, which autograd still runs."""
+    sim = Simulator(radar, short_chain)
+    times = _steps(radar, short_chain)
+    pos, mask = window(times, hands=1, seed=3)
+    sk, mk = torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
+    with torch.no_grad():
+        fast = sim.slot_profiles(sk, mk)
+    full = sim.slot_profiles(sk.clone().requires_grad_(True), mk).detach()
+    assert torch.equal(fast, full)
+    assert float(fast[0, 19:].abs().max()) == 0.0
+
+
+def test_profiles_of_silent_or_no_points_stay_differentiable(radar, short_chain):
+    """A caller may backpropagate through points that all reflect nothing, or through none at all
+    (the gap engine drops silent points first): the profiles still carry the graph (zero gradient)."""
+    times = torch.as_tensor(_steps(radar, short_chain))
+    ct = window_chirp_times(radar, short_chain)
+    for k in (3, 0):
+        tx = torch.full((1, len(times), k, 3), 0.3, dtype=torch.float64, requires_grad=True)
+        scat = Scatterers(tx, tx, torch.full((1, len(times), k), 1e-3, dtype=torch.float64),
+                          torch.zeros(1, len(times), k, dtype=torch.float64), torch.arange(k))
+        prof = scatterer_profiles(scat, times, ct, radar, short_chain, **AMP)
+        assert prof.requires_grad and float(prof.detach().abs().max()) == 0.0
+        torch.view_as_real(prof).sum().backward()
+        assert tx.grad is not None and float(tx.grad.abs().sum()) == 0.0
+
+
 def test_chirp_times_of_the_window(radar, chain):
     ct = window_chirp_times(radar, chain)
     assert ct.shape == (16, 128, 1)

@@ -50,6 +50,7 @@ Public API:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -147,7 +148,7 @@ def _buried(verts: np.ndarray, start: np.ndarray, axis: np.ndarray, length: np.n
 
 # ---- analytic backend: exact segment / prism tests, batched over many scenes -------------------------
 _GROW = 1.0 + 1e-9  # widens every culling bound so that rounding never drops a real candidate
-_PAIR_CHUNK = 1024  # bone pairs per pass of the exact tests (temporaries stay in the CPU cache)
+_PAIR_CHUNK = 512  # bone pairs per pass of the exact tests (temporaries stay in the CPU cache and the allocator's heap)
 
 
 def _plane_facing(start: np.ndarray, axis: np.ndarray, length: np.ndarray, e1: np.ndarray, e2: np.ndarray,
@@ -185,10 +186,10 @@ def _polygon_hits(p: np.ndarray, s: np.ndarray, e1: np.ndarray, e2: np.ndarray, 
     ``sections``-gon of circumradius ``radius`` about the axis through s (cross-section axes e1 e2):
     Cyrus-Beck clipping by the side planes m . (x - s) <= radius cos(pi / sections)."""
     theta = 2.0 * np.pi * (np.arange(sections) + 0.5) / sections
-    c, sn = np.cos(theta), np.sin(theta)
-    u = np.einsum("mj,mj->m", e1, p)[:, None] * c + np.einsum("mj,mj->m", e2, p)[:, None] * sn
-    w = ((radius * np.cos(np.pi / sections))[:, None]
-         + np.einsum("mj,mj->m", e1, s)[:, None] * c + np.einsum("mj,mj->m", e2, s)[:, None] * sn)
+    normals = np.stack([np.cos(theta), np.sin(theta)])  # (2, sections): m in the (e1, e2) frame
+    u = np.stack([np.einsum("mj,mj->m", e1, p), np.einsum("mj,mj->m", e2, p)], axis=1) @ normals
+    w = np.stack([np.einsum("mj,mj->m", e1, s), np.einsum("mj,mj->m", e2, s)], axis=1) @ normals
+    w += (radius * np.cos(np.pi / sections))[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         bound = w / u
     lo = np.maximum(lo, np.where(u < 0.0, bound, -np.inf).max(-1))
@@ -269,15 +270,27 @@ def _shadow_pass(z: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     return sure, band, lo, hi, inside
 
 
-def _line_layout(template: CylinderTemplate) -> tuple[np.ndarray, np.ndarray]:
+@functools.cache
+def _line_layout(template: CylinderTemplate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The template's vertices on lines: (lines, rings) template index of each (line, ring) slot,
     -1 where there is none, for the ``sections`` generators and the two cap centres (ring 0 only);
-    and the (lines, 4) homogeneous template point of each line's ring 0."""
+    the (lines, 4) homogeneous template point of each line's ring 0; and (lines * rings, P) the
+    face planes (_plane_facing's columns) of each slot's occluder triangles, padded with the extra
+    column sections + 2 (empty slots: all padding). A vertex faces iff one of its planes does."""
     sec, rings, n_side = template.sections, template.rings, template.sections * template.rings
     index = np.full((sec + 2, rings), -1, np.int64)
     index[:sec] = np.arange(rings)[None] * sec + np.arange(sec)[:, None]
     index[sec:, 0] = n_side, n_side + 1
-    return index, template.homogeneous[index[:, 0]]
+    faces = template.vertex_occluder_faces[np.clip(index, 0, None)]  # (lines, rings, degree)
+    plane = np.where((faces >= 0) & (index >= 0)[..., None], template.occluder_face_plane[np.clip(faces, 0, None)],
+                     sec + 2)
+    sets = [sorted(set(row) - {sec + 2}) for row in plane.reshape(-1, plane.shape[-1]).tolist()]
+    planes = np.full((len(sets), max(map(len, sets))), sec + 2, np.int64)
+    for i, row in enumerate(sets):
+        planes[i, :len(row)] = row
+    hom_a = template.homogeneous[index[:, 0]]
+    assert np.array_equal(hom_a[sec:], [[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0]])  # _analytic_counts relies on it
+    return index, hom_a, planes
 
 
 def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, template: CylinderTemplate,
@@ -302,18 +315,19 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
 
     # vertices in line layout (C, lines, rings): line l, ring r is A_l + z_r B, z_r = r / (rings - 1),
     # the sections' generators, then the bottom and top cap centres (ring 0 only)
-    index, hom_a = _line_layout(template)
-    toward = _plane_facing(start, axis, length, e1, e2, radius, sec)[:, template.occluder_face_plane]
-    groups = template.facing_groups  # vertices with the same occluder triangles share the test
-    per_group = np.zeros((c, len(groups) + 1), bool)  # last column: the layout's empty slots
-    per_group[:, :-1] = np.where(groups >= 0, toward[:, np.clip(groups, 0, None)], False).any(-1)
-    facing = per_group[:, np.where(index >= 0, template.vertex_facing_group[index], len(groups))]
+    index, hom_a, planes = _line_layout(template)
+    toward = np.zeros((c, sec + 3), bool)  # the face planes that face the radar; last column: padding
+    toward[:, :-1] = _plane_facing(start, axis, length, e1, e2, radius, sec)
+    facing = toward[:, planes[:, 0]]
+    for k in range(1, planes.shape[1]):
+        facing |= toward[:, planes[:, k]]
+    facing = facing.reshape(c, n_lines, rings)
     any_facing = facing.any(-1)  # (C, lines); a line's facing rings are contiguous (all, or a cap's)
     face_lo = np.where(any_facing, facing.argmax(-1), rings)
     face_hi = np.where(any_facing, rings - 1 - facing[:, :, ::-1].argmax(-1), -1)
     is_side = (np.arange(n_lines) < sec).astype(np.float64)
     frame = np.stack([radius[:, None] * e1, radius[:, None] * e2, length[:, None] * axis, start], axis=-1)
-    point_a = np.ascontiguousarray(np.swapaxes(frame @ hom_a.T, 1, 2))  # (C, lines, 3)
+    point_a = np.ascontiguousarray(np.swapaxes((frame.reshape(-1, 4) @ hom_a.T).reshape(c, 3, n_lines), 1, 2))  # (C, lines, 3)
     vec_b = length[:, None] * axis  # (C, 3): the generators' direction
     a_sq = np.einsum("clx,clx->cl", point_a, point_a).reshape(-1)  # (C * lines,)
     ab2 = (2.0 * np.einsum("clx,cx->cl", point_a, vec_b) * is_side).reshape(-1)
@@ -336,7 +350,7 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
     g = g_all[jj]  # (P, 5, 3)
     g_s = np.einsum("pkj,pj->pk", g, start[ii])
     g_e = g_s + np.einsum("pkj,pj->pk", g, vec_b[ii])
-    keep = (np.minimum(g_s, g_e) - radius[ii, None] * np.linalg.norm(g, axis=-1) <= h_all[jj]).all(1) | (not cull)
+    keep = (np.minimum(g_s, g_e) - radius[ii, None] * np.linalg.norm(g_all, axis=-1)[jj] <= h_all[jj]).all(1) | (not cull)
     ii, jj = ii[keep], jj[keep]
     reach_in = np.hypot(0.5 * length, inner)  # the buried test's pairs (as in _buried)
     touch = np.linalg.norm(centre[ii] - centre[jj], axis=-1) - reach_in[ii] - reach_in[jj] < 0
@@ -352,26 +366,40 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
                       radius**2 * _GROW, (inner - RAY_OFFSET_M) ** 2])  # (6, C)
     blocked = np.zeros(c * n_lines * rings, bool)  # line layout, flat
     buried = np.zeros_like(blocked)
+    band_tests = []  # (flat index, point, occluder, lo, hi) of the band candidates
     for p0 in range(0, len(ii), _PAIR_CHUNK):
         i_c, j_c = ii[p0:p0 + _PAIR_CHUNK], jj[p0:p0 + _PAIR_CHUNK]
         npc = len(i_c)
-        fm = funcs[j_c] @ frame[i_c]  # f^T M_i, (P, 7, 4)
-        f0 = fm @ hom_a.T  # f . A per line, (P, 7, lines)
+        fm = funcs[j_c] @ frame[i_c]  # f^T M_i, (P, 7, 4): f . (A_l + z B) = fm . (x_l, y_l, z, 1)
         f1 = fm[:, :, 2]  # f . B along the generators (the caps' lines are single points)
-        # ring range of each line where all five conditions can hold; on the generators the sign of
-        # f1 says whether a condition bounds z from below or above
-        h_c = h_all[j_c][:, :, None]
+        # ring range of each line where all five conditions can hold: on a generator condition k
+        # holds for z (ring units) >= or <= (h_k - f_k . A_l) * inv_k as f1 < 0 or > 0, so both bounds
+        # of every side line come from one matmul each of the functionals times -inv_k, their
+        # constant column shifted by h_k inv_k -+ a margin; a condition that is no bound on that
+        # side gets the constant -+1e300 (and zeros: the matmul gives exactly that)
+        h5 = h_all[j_c]
         f1_5 = f1[:, :5]
         inv = (rings - 1) / np.where(f1_5 == 0.0, 1.0, f1_5)
-        bound = (h_c - f0[:, :5, :sec]) * inv[:, :, None]  # in ring units
+        # laid out (5, P, ...): the reductions over the conditions run over contiguous slabs
+        scaled = (fm[:, :5] * -inv[:, :, None]).transpose(1, 0, 2)
+        below_lo, below_hi, shift = (f1_5 < 0.0).T, (f1_5 > 0.0).T, (h5 * inv).T
+        side_a = hom_a[:sec].T  # the generators' ring-0 points (z = 0)
         r_lo = np.full((npc, n_lines), -np.inf)
         r_hi = np.full((npc, n_lines), np.inf)
-        r_lo[:, :sec] = (bound + np.where(f1_5 < 0.0, -1e-6, -np.inf)[:, :, None]).max(1)
-        r_hi[:, :sec] = (bound + np.where(f1_5 > 0.0, 1e-6, np.inf)[:, :, None]).min(1)
+        for below, out, margin, reduce in ((below_lo, r_lo, -1e-6, np.max), (below_hi, r_hi, 1e-6, np.min)):
+            lin = np.where(below[:, :, None], scaled, 0.0)
+            lin[:, :, 3] = np.where(below, lin[:, :, 3] + shift + margin, -1e300 if margin < 0 else 1e300)
+            out[:, :sec] = reduce((lin.reshape(-1, 4) @ side_a).reshape(5, npc, sec), axis=0)
         never = np.zeros((npc, n_lines), bool)
-        if (f1_5 == 0.0).any():
-            never[:, :sec] = ((f1_5 == 0.0)[:, :, None] & (f0[:, :5, :sec] > h_c)).any(1)
-        never[:, sec:] = (f0[:, :5, sec:] > h_c).any(1)
+        h_c = h5[:, :, None]
+        flat_pairs = np.flatnonzero((f1_5 == 0.0).any(1))
+        if len(flat_pairs):  # parallel to a condition's plane: the condition holds on all or none of a line
+            f0_side = (fm[flat_pairs, :5].reshape(-1, 4) @ side_a).reshape(-1, 5, sec)
+            never[flat_pairs, :sec] = ((f1_5[flat_pairs] == 0.0)[:, :, None] & (f0_side > h_c[flat_pairs])).any(1)
+        # the cap centres are template points (0, 0, 0, 1) and (0, 0, 1, 1): f . A = fm_3, fm_2 + fm_3
+        never[:, sec] = (fm[:, :5, 3] > h5).any(1)
+        never[:, sec + 1] = (fm[:, :5, 2] + fm[:, :5, 3] > h5).any(1)
+        f0 = (fm[:, 5:].reshape(-1, 4) @ hom_a.T).reshape(npc, 2, n_lines)  # a . A_l, s-perp . A_l
         if not cull:
             r_lo, r_hi, never = np.full_like(r_lo, -np.inf), np.full_like(r_hi, np.inf), np.zeros_like(never)
         r_lo = np.maximum(np.ceil(r_lo), face_lo[i_c])
@@ -385,11 +413,10 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
         i_r, j_r = i_c[pr], j_c[pr]
         il = i_r * n_lines + ln
         side = is_side[ln]
-        f0_pl = f0.reshape(npc * 7, n_lines)
         row_k = np.empty((13, len(pr)))
-        row_k[0] = f0_pl[pr * 7 + 5, ln]
+        row_k[0] = f0[pr, 0, ln]
         row_k[1] = f1[pr, 5] * side
-        row_k[2] = f0_pl[pr * 7 + 6, ln]
+        row_k[2] = f0[pr, 1, ln]
         row_k[3] = f1[pr, 6] * side
         row_k[4], row_k[5], row_k[6] = a_sq[il], ab2[il], length_sq[i_r] * side
         row_k[7:13] = occ_k[:, j_r]
@@ -399,20 +426,24 @@ def _analytic_counts(joints: np.ndarray, scene: np.ndarray, radii: np.ndarray, t
         ring = lo_row[rep] + np.arange(len(rep)) - (np.cumsum(count) - count)[rep]
         z = ring / (rings - 1)
         sure, band, lo, hi, inside = _shadow_pass(z, k)
-        if band.any():
-            b = np.flatnonzero(band)
-            rb, jb = rep[b], j_r[rep[b]]
-            p = point_a.reshape(c * n_lines, 3)[il[rb]] + (z[b] * side[rb])[:, None] * vec_b[i_r[rb]]
-            sure[b] = _polygon_hits(p, start[jb], e1[jb], e2[jb], radius[jb], lo[b], hi[b], sec)
-        if holds[j_r].any():
+        flat = (il * rings)[rep] + ring
+        if holds[j_r].any():  # a prism holding the radar: the far end decides (replaces sure and band)
             h_ = np.flatnonzero(holds[j_r[rep]])
             rh, jh = rep[h_], j_r[rep[h_]]
             p = point_a.reshape(c * n_lines, 3)[il[rh]] + (z[h_] * side[rh])[:, None] * vec_b[i_r[rh]]
             p *= (1.0 - RAY_OFFSET_M / np.linalg.norm(p, axis=-1))[:, None]
             sure[h_] = ~_in_prism(p, start[jh], axis[jh], e1[jh], e2[jh], length[jh], radius[jh], sec)
-        flat = (il * rings)[rep] + ring
+            band[h_] = False
+        if band.any():  # the prism's faces decide: collected, tested once after the loop
+            b = np.flatnonzero(band)
+            rb, jb = rep[b], j_r[rep[b]]
+            p = point_a.reshape(c * n_lines, 3)[il[rb]] + (z[b] * side[rb])[:, None] * vec_b[i_r[rb]]
+            band_tests.append((flat[b], p, jb, lo[b], hi[b]))
         blocked[flat[sure]] = True
         buried[flat[inside]] = True  # inside j implies the segment meets j: buried is blocked too
+    if band_tests:  # one call for all chunks (its cost is mostly per call)
+        flat_b, p, jb, lo, hi = (np.concatenate(x) for x in zip(*band_tests))
+        blocked[flat_b[_polygon_hits(p, start[jb], e1[jb], e2[jb], radius[jb], lo, hi, sec)]] = True
     facing = facing.reshape(-1) & ~buried
     visible = facing & ~blocked
     return (visible.reshape(n, N_BONES, -1).sum(-1).astype(np.int32),

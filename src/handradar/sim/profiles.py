@@ -60,25 +60,38 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     r_tx, r_rx = scat.tx.norm(dim=-1), scat.rx.norm(dim=-1)  # (B, T, K) at the skeleton steps
     amp = radar_amplitude(scat.rcs_m2, r_tx, r_rx, radar.wavelength_m, tx_power_w, gain_tx_dbi,
                           gain_rx_dbi) * scat.gain
-    amp_c = lerp(amp, lo, frac)  # (B, M, K)
-    rng = 0.5 * (lerp(scat.tx, lo, frac).norm(dim=-1) + lerp(scat.rx, lo, frac).norm(dim=-1))  # (B, M, K)
+    # the chirps innermost, (B, K, M): the slots come out contiguous in the (B, 39, F, L, Ch, bins)
+    # layout that combine_slots and the cache read without a copy
+    amp_c = lerp(amp, lo, frac).transpose(1, 2).contiguous()
+    pos_tx = lerp(scat.tx, lo, frac).norm(dim=-1)
+    pos_rx = pos_tx if scat.rx is scat.tx else lerp(scat.rx, lo, frac).norm(dim=-1)  # direct paths: rx is tx
+    rng = (0.5 * (pos_tx + pos_rx)).transpose(1, 2).contiguous()  # (B, K, M)
+
+    # points silent at every chirp of the batch (a hand untracked all window) add exact zeros: their
+    # range response is skipped, unless autograd is recording (d/d amplitude is nonzero at amplitude
+    # 0 too, and a caller may backpropagate through an all-silent batch)
+    owner = torch.where(scat.owner < 0, torch.full_like(scat.owner, N_SLOTS), scat.owner)
+    if not (torch.is_grad_enabled() and (amp_c.requires_grad or rng.requires_grad)):
+        live = torch.nonzero((amp_c != 0).transpose(0, 1).flatten(1).any(1)).flatten()
+        if live.numel() < scat.n_points:
+            rng, amp_c, owner = rng[:, live], amp_c[:, live], owner[live]
 
     b0, b1 = gate_bins(radar, chain)
     bins = torch.arange(b0, b1, device=dev)
     beat = rng * (2.0 * radar.slope_hz_per_s / SPEED_OF_LIGHT_M_S / radar.sample_rate_hz)
-    resp = range_response(beat, bins, radar.n_samples, chain.range_window).to(cdtype)  # (B, M, K, nb)
     phase = rng * (-4.0 * math.pi / radar.wavelength_m)
     carrier = torch.polar(amp_c, phase)  # A exp(-j 4 pi R / lambda)
-    prof = resp * carrier[..., None]
+    prof = range_response(beat, bins, radar.n_samples, chain.range_window, carrier).to(cdtype)  # (B, K, M, nb)
 
-    bsz, m = prof.shape[:2]
-    owner = torch.where(scat.owner < 0, torch.full_like(scat.owner, N_SLOTS), scat.owner)
-    if scat.n_points == N_SLOTS and bool((owner == torch.arange(N_SLOTS, device=dev)).all()):
-        slots = torch.cat([prof, prof.new_zeros(bsz, m, 1, prof.shape[-1])], dim=2)
+    bsz, m = prof.shape[0], prof.shape[2]
+    if owner.shape[0] == N_SLOTS and bool((owner == torch.arange(N_SLOTS, device=dev)).all()):
+        slots = torch.cat([prof, prof.new_zeros(bsz, 1, m, prof.shape[-1])], dim=1)
+    elif owner.shape[0] <= N_SLOTS and bool((owner[1:] > owner[:-1]).all()):  # distinct slots: a copy
+        slots = prof.new_zeros(bsz, N_ALL_SLOTS, m, prof.shape[-1]).index_copy(1, owner, prof)
     else:
-        slots = prof.new_zeros(bsz, m, N_ALL_SLOTS, prof.shape[-1]).index_add(2, owner, prof)
-    slots = slots.reshape(bsz, f, l, c, 1, N_ALL_SLOTS, -1).expand(-1, -1, -1, -1, radar.n_rx, -1, -1)
-    return slots.reshape(bsz, f, l, c * radar.n_rx, N_ALL_SLOTS, -1).permute(0, 4, 1, 2, 3, 5)
+        slots = prof.new_zeros(bsz, N_ALL_SLOTS, m, prof.shape[-1]).index_add(1, owner, prof)
+    slots = slots.reshape(bsz, N_ALL_SLOTS, f, l, c, 1, -1).expand(-1, -1, -1, -1, -1, radar.n_rx, -1)
+    return slots.reshape(bsz, N_ALL_SLOTS, f, l, c * radar.n_rx, -1)
 
 
 def _weighted_sum(flat: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
