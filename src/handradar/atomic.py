@@ -3,7 +3,8 @@
 An interrupted run (exception, Ctrl-C, SIGTERM through :mod:`handradar.runs.cli`) never leaves a
 partial file at the target path. A killed run (SIGKILL, power loss) leaves its temporary file
 ``.{name}.{pid}@{host}.{random}.part``; the next write of the same target removes it once its
-process is gone (see :func:`remove_stale_parts`).
+process is gone (see :func:`remove_stale_parts`). :func:`file_lock` serialises processes that
+build the same file.
 """
 
 from __future__ import annotations
@@ -82,6 +83,28 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.replace(tmp_path, path)
     finally:
         tmp_path.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def file_lock(path: str | Path | None) -> Iterator[None]:
+    """Hold an exclusive ``fcntl.flock`` on ``path`` (created if missing) for the block; None: no lock.
+
+    Serialises processes that build the same file (two jobs of a sweep filling one cache, writers
+    of one SQLite database). POSIX only, like the shared file systems it is meant for.
+    """
+    if path is None:
+        yield
+        return
+    import fcntl
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:

@@ -7,10 +7,10 @@ from __future__ import annotations
 import pytest
 from hydra import compose, initialize_config_dir
 
+from handradar.config import VERSION_BASE, config_dir
 from handradar.gap.benchmark import Case, case_world
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
-from handradar.config import VERSION_BASE, config_dir
 from handradar.sim.factory import SimFactory
 from handradar.world import build_world_dataset
 

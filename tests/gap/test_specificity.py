@@ -12,7 +12,12 @@ from handradar.gap.diagnosis import DiagnosisConfig, diagnose
 from handradar.gap.engine import RowSet
 from handradar.gap.markdown import render
 from handradar.gap.report import ReportError, validate_report
-from handradar.gap.specificity import EXPECTED_FACTOR, interaction, row_factors, specificity
+from handradar.gap.specificity import (
+    EXPECTED_FACTOR,
+    interaction,
+    row_factors,
+    specificity,
+)
 from tests.gap.conftest import builder, gap_data
 
 T = 11

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 import pytest
 import torch
@@ -102,7 +105,8 @@ def test_cache_is_reused_and_written_atomically(tmp_path, monkeypatch):
     pos, t, masks = _windows()
     first = cached_bone_features(pos, t, masks, WAVELENGTH, RAW, tmp_path)
     files = sorted(p.name for p in tmp_path.iterdir())
-    assert len(files) == 1 and files[0].startswith("bone_features-") and files[0].endswith(".h5")
+    assert len(files) == 2 and files[0].startswith("bone_features-") and files[0].endswith(".h5")
+    assert files[1] == files[0] + ".lock"  # nothing else: no temporary or partial file is left
     direct = bone_features(pos[1], t, masks[1], WAVELENGTH, RAW)
     np.testing.assert_array_equal(first.features[1], direct.features)
 
@@ -139,6 +143,39 @@ def test_interrupted_run_leaves_no_cache_and_resumes(tmp_path, monkeypatch):
     assert len(calls) == 2  # rows 2 and 3 only
     assert isinstance(out, BoneFeatures) and out.features.shape == (4, 6, 2, 19, 5)
     np.testing.assert_array_equal(out.features[3], real(pos[3], t, masks[3], WAVELENGTH, RAW).features)
+    assert not list(tmp_path.glob("*.partial"))
+
+
+def test_concurrent_builders_of_one_key_compute_once(tmp_path, monkeypatch):
+    """Two jobs of a sweep asking for the same features at once: one computes, the other reads."""
+    pos, t, masks = _windows(n=3)
+    real = features_mod.bone_features
+    calls = []
+
+    def slow(p, *a, **k):
+        calls.append(1)
+        time.sleep(0.05)  # long enough for the other thread to arrive while this one computes
+        return real(p, *a, **k)
+
+    monkeypatch.setattr(features_mod, "bone_features", slow)
+    start = threading.Barrier(2)
+    results, errors = [], []
+
+    def job():
+        start.wait()
+        try:
+            results.append(cached_bone_features(pos, t, masks, WAVELENGTH, RAW, tmp_path, chunk=1))
+        except BaseException as exc:  # noqa: BLE001 - reported by the assertion below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=job) for _ in range(2)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    assert errors == [] and len(results) == 2
+    assert len(calls) == 3  # each row once, not once per job
+    np.testing.assert_array_equal(results[0].features, results[1].features)
     assert not list(tmp_path.glob("*.partial"))
 
 

@@ -20,6 +20,7 @@ from handradar.world.scene import (
     facet_geometry,
     facet_rcs,
     pattern_exponents,
+    strip_along_factor,
     visibility,
 )
 from tests.world.conftest import range_doppler, with_effects
@@ -30,6 +31,20 @@ def profiles(world, radar, chain, spec):
     p = fast_profiles(sim.tracks, sim.radar, chain, sim.radar.n_frames, world.effects, sim.rng_noise, sim.rng_quant,
                       sim.noise_sigma)
     return sim, p
+
+
+@pytest.mark.parametrize("s", [0.0, 0.7, -2.95, 3.0, 3.01, 8.0, -30.0])
+def test_strip_along_factor_against_the_integral(s):
+    """integral_{-1/2}^{1/2} exp(j (s x + q x^2)) dx by quadrature, across the series/closed-form
+    switch at |s| = 3 and the near-field range |q| <= 4: error within the documented third order."""
+    from scipy.integrate import quad
+
+    for q in (-4.0, -1.0, -0.25, 0.0, 0.5, 2.0, 4.0):
+        re = quad(lambda x: np.cos(s * x + q * x * x), -0.5, 0.5)[0]
+        im = quad(lambda x: np.sin(s * x + q * x * x), -0.5, 0.5)[0]
+        got = strip_along_factor(np.array([s], np.float32), np.array([q], np.float32))[0]
+        bound = abs(q) ** 3 / 2688 + (abs(q) * s ** 6 / 1658880 if abs(s) <= 3 else 0.0)
+        assert abs(got - complex(re, im)) <= bound + 1e-6, (s, q)
 
 
 def test_visibility_of_a_known_scene():

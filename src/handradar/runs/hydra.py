@@ -21,7 +21,7 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig
 
-from handradar.runs.mlflow import file_lock
+from handradar.atomic import file_lock
 
 log = logging.getLogger(__name__)
 REPORT = "jobs.jsonl"

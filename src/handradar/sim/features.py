@@ -20,7 +20,8 @@ Visibility is the expensive part (ray casting every step); results are cached in
 named by :func:`handradar.provenance.config_hash` of the hand model, the radar wavelength, the
 times and a digest of the skeleton arrays, written through :func:`handradar.atomic.atomic_path`.
 Long computations are resumable: finished rows go to ``<cache>.partial`` (HDF5, attribute
-``done``) and a rerun with the same key continues from there.
+``done``) and a rerun with the same key continues from there. Processes that need the same key at
+once take turns on ``<cache>.lock``: one computes, the others then read its file.
 
 Public API:
 
@@ -44,7 +45,7 @@ import h5py
 import numpy as np
 import torch
 
-from handradar.atomic import atomic_path
+from handradar.atomic import atomic_path, file_lock
 from handradar.hand.mesh import bone_radii, default_template
 from handradar.hand.model import HandModelConfig
 from handradar.hand.skeleton import N_BONES
@@ -115,6 +116,16 @@ def features_key(positions: np.ndarray, times: np.ndarray, masks: np.ndarray, wa
         np.asarray(positions, np.float32), np.asarray(times, np.float64), np.asarray(masks, bool)))
 
 
+def _read_cache(path: Path, key: str) -> BoneFeatures | None:
+    """The cached features at ``path`` when it holds this format and key, else None."""
+    if not path.is_file():
+        return None
+    with h5py.File(path, "r") as h5:
+        if h5.attrs.get("format") == CACHE_FORMAT and h5.attrs.get("config_hash") == key:
+            return BoneFeatures(h5["features"][()], h5["facing"][()])
+    return None
+
+
 def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.ndarray, wavelength_m: float,
                          cfg: HandModelConfig | None = None, cache_dir: str | Path | None = None,
                          *, rcs_exponent: float = 1.0, progress: bool = False, chunk: int = 16,
@@ -142,51 +153,54 @@ def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.nda
                             np.stack([r.facing for r in rows]) if rows else np.zeros((0, t, 2, N_BONES), np.int32))
     key = features_key(positions, times, masks, wavelength_m, cfg, rcs_exponent)
     path = Path(cache_dir) / f"bone_features-{key}.h5"
-    if path.is_file():
-        with h5py.File(path, "r") as h5:
-            if h5.attrs.get("format") == CACHE_FORMAT and h5.attrs.get("config_hash") == key:
-                return BoneFeatures(h5["features"][()], h5["facing"][()])
-    partial = path.with_name(path.name + ".partial")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    mode = "a" if partial.is_file() else "w"
-    try:
-        h5p = h5py.File(partial, mode)
-    except OSError:  # a corrupt partial file from a hard kill: start over
-        partial.unlink(missing_ok=True)
-        h5p = h5py.File(partial, "w")
-    with h5p:
-        if h5p.attrs.get("config_hash") != key or "features" not in h5p:
-            for k in list(h5p.keys()):
-                del h5p[k]
-            h5p.attrs["config_hash"] = key
-            h5p.attrs["done"] = 0
-            h5p.create_dataset("features", (n, t, 2, N_BONES, N_FEATURES), dtype="f4")
-            h5p.create_dataset("facing", (n, t, 2, N_BONES), dtype="i4")
-        done = int(h5p.attrs["done"])
-        blocks = range(done, n, chunk)
-        if progress:
-            from tqdm import tqdm
-            blocks = tqdm(blocks, desc="bone features", unit="block")
-        for i0 in blocks:
-            i1 = min(n, i0 + chunk)
-            if n_jobs > 1:
-                from joblib import Parallel, delayed
-                rows = Parallel(n_jobs=n_jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m, cfg,
-                                                                       rcs_exponent)
-                                               for i in range(i0, i1))
-            else:
-                rows = [compute(i) for i in range(i0, i1)]
-            h5p["features"][i0:i1] = np.stack([r.features for r in rows])
-            h5p["facing"][i0:i1] = np.stack([r.facing for r in rows])
-            h5p.attrs["done"] = i1
-            h5p.flush()
-        feats, facing = h5p["features"][()], h5p["facing"][()]
-    with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as h5:
-            h5.attrs["format"] = CACHE_FORMAT
-            h5.attrs["config_hash"] = key
-            h5.attrs["feature_names"] = list(FEATURE_NAMES)
-            h5.create_dataset("features", data=feats)
-            h5.create_dataset("facing", data=facing)
-    os.unlink(partial)
+    cached = _read_cache(path, key)
+    if cached is not None:
+        return cached
+    # One builder per key: a second process (another job of a sweep) waits here, then reads.
+    with file_lock(path.with_name(path.name + ".lock")):
+        cached = _read_cache(path, key)
+        if cached is not None:
+            return cached
+        partial = path.with_name(path.name + ".partial")
+        mode = "a" if partial.is_file() else "w"
+        try:
+            h5p = h5py.File(partial, mode)
+        except OSError:  # a corrupt partial file from a hard kill: start over
+            partial.unlink(missing_ok=True)
+            h5p = h5py.File(partial, "w")
+        with h5p:
+            if h5p.attrs.get("config_hash") != key or "features" not in h5p:
+                for k in list(h5p.keys()):
+                    del h5p[k]
+                h5p.attrs["config_hash"] = key
+                h5p.attrs["done"] = 0
+                h5p.create_dataset("features", (n, t, 2, N_BONES, N_FEATURES), dtype="f4")
+                h5p.create_dataset("facing", (n, t, 2, N_BONES), dtype="i4")
+            done = int(h5p.attrs["done"])
+            blocks = range(done, n, chunk)
+            if progress:
+                from tqdm import tqdm
+                blocks = tqdm(blocks, desc="bone features", unit="block")
+            for i0 in blocks:
+                i1 = min(n, i0 + chunk)
+                if n_jobs > 1:
+                    from joblib import Parallel, delayed
+                    rows = Parallel(n_jobs=n_jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m,
+                                                                           cfg, rcs_exponent)
+                                                   for i in range(i0, i1))
+                else:
+                    rows = [compute(i) for i in range(i0, i1)]
+                h5p["features"][i0:i1] = np.stack([r.features for r in rows])
+                h5p["facing"][i0:i1] = np.stack([r.facing for r in rows])
+                h5p.attrs["done"] = i1
+                h5p.flush()
+            feats, facing = h5p["features"][()], h5p["facing"][()]
+        with atomic_path(path) as tmp:
+            with h5py.File(tmp, "w") as h5:
+                h5.attrs["format"] = CACHE_FORMAT
+                h5.attrs["config_hash"] = key
+                h5.attrs["feature_names"] = list(FEATURE_NAMES)
+                h5.create_dataset("features", data=feats)
+                h5.create_dataset("facing", data=facing)
+        os.unlink(partial)
     return BoneFeatures(feats, facing)
