@@ -121,43 +121,45 @@ def test_cache_is_reused_and_written_atomically(tmp_path, monkeypatch):
         cached_bone_features(pos, t, masks, WAVELENGTH, HandModelConfig(retarget=True, visibility_stride=4), tmp_path)
 
 
+def _spy(monkeypatch, before=None) -> list[int]:
+    """Patch bone_features to count its calls (and call ``before(count)`` first); the calls list."""
+    calls: list[int] = []
+
+    def counted(p, *a, **k):
+        calls.append(1)
+        if before is not None:
+            before(len(calls))
+        return bone_features(p, *a, **k)
+
+    monkeypatch.setattr(features_mod, "bone_features", counted)
+    return calls
+
+
 def test_interrupted_run_leaves_no_cache_and_resumes(tmp_path, monkeypatch):
     pos, t, masks = _windows(n=4)
-    real = features_mod.bone_features
-    calls = []
 
-    def flaky(p, *a, **k):
-        calls.append(1)
-        if len(calls) == 3:
+    def interrupt_third(count):
+        if count == 3:
             raise KeyboardInterrupt
-        return real(p, *a, **k)
 
-    monkeypatch.setattr(features_mod, "bone_features", flaky)
+    _spy(monkeypatch, interrupt_third)
     with pytest.raises(KeyboardInterrupt):
         cached_bone_features(pos, t, masks, WAVELENGTH, RAW, tmp_path, chunk=1)
     assert not list(tmp_path.glob("*.h5"))  # no final file, only the resumable partial
     assert len(list(tmp_path.glob("*.h5.partial"))) == 1
-    calls.clear()
-    monkeypatch.setattr(features_mod, "bone_features", lambda p, *a, **k: (calls.append(1), real(p, *a, **k))[1])
+    calls = _spy(monkeypatch)
     out = cached_bone_features(pos, t, masks, WAVELENGTH, RAW, tmp_path, chunk=1)
     assert len(calls) == 2  # rows 2 and 3 only
     assert isinstance(out, BoneFeatures) and out.features.shape == (4, 6, 2, 19, 5)
-    np.testing.assert_array_equal(out.features[3], real(pos[3], t, masks[3], WAVELENGTH, RAW).features)
+    np.testing.assert_array_equal(out.features[3], bone_features(pos[3], t, masks[3], WAVELENGTH, RAW).features)
     assert not list(tmp_path.glob("*.partial"))
 
 
 def test_concurrent_builders_of_one_key_compute_once(tmp_path, monkeypatch):
     """Two jobs of a sweep asking for the same features at once: one computes, the other reads."""
     pos, t, masks = _windows(n=3)
-    real = features_mod.bone_features
-    calls = []
-
-    def slow(p, *a, **k):
-        calls.append(1)
-        time.sleep(0.05)  # long enough for the other thread to arrive while this one computes
-        return real(p, *a, **k)
-
-    monkeypatch.setattr(features_mod, "bone_features", slow)
+    # each row slow enough for the other thread to arrive while this one computes
+    calls = _spy(monkeypatch, lambda count: time.sleep(0.05))
     start = threading.Barrier(2)
     results, errors = [], []
 

@@ -38,6 +38,7 @@ Public API:
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -144,13 +145,17 @@ def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.nda
         raise ValueError(f"expected positions (N, T, 2, 21, 3), times (T,), masks (N, T, 2); found "
                          f"{positions.shape}, {np.shape(times)}, {masks.shape}")
 
-    def compute(i: int) -> BoneFeatures:
-        return bone_features(positions[i], times, masks[i], wavelength_m, cfg, rcs_exponent)
+    def rows(i0: int, i1: int, jobs: int = n_jobs) -> list[BoneFeatures]:
+        if jobs > 1:
+            from joblib import Parallel, delayed
+            return Parallel(n_jobs=n_jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m, cfg,
+                                                                  rcs_exponent) for i in range(i0, i1))
+        return [bone_features(positions[i], times, masks[i], wavelength_m, cfg, rcs_exponent) for i in range(i0, i1)]
 
     if cache_dir is None:
-        rows = [compute(i) for i in range(n)]
-        return BoneFeatures(np.stack([r.features for r in rows]) if rows else np.zeros((0, t, 2, N_BONES, N_FEATURES), np.float32),
-                            np.stack([r.facing for r in rows]) if rows else np.zeros((0, t, 2, N_BONES), np.int32))
+        out = rows(0, n, jobs=1)
+        return BoneFeatures(np.stack([r.features for r in out]) if out else np.zeros((0, t, 2, N_BONES, N_FEATURES), np.float32),
+                            np.stack([r.facing for r in out]) if out else np.zeros((0, t, 2, N_BONES), np.int32))
     key = features_key(positions, times, masks, wavelength_m, cfg, rcs_exponent)
     path = Path(cache_dir) / f"bone_features-{key}.h5"
     cached = _read_cache(path, key)
@@ -159,48 +164,48 @@ def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.nda
     # One builder per key: a second process (another job of a sweep) waits here, then reads.
     with file_lock(path.with_name(path.name + ".lock")):
         cached = _read_cache(path, key)
-        if cached is not None:
-            return cached
-        partial = path.with_name(path.name + ".partial")
-        mode = "a" if partial.is_file() else "w"
-        try:
-            h5p = h5py.File(partial, mode)
-        except OSError:  # a corrupt partial file from a hard kill: start over
-            partial.unlink(missing_ok=True)
-            h5p = h5py.File(partial, "w")
-        with h5p:
-            if h5p.attrs.get("config_hash") != key or "features" not in h5p:
-                for k in list(h5p.keys()):
-                    del h5p[k]
-                h5p.attrs["config_hash"] = key
-                h5p.attrs["done"] = 0
-                h5p.create_dataset("features", (n, t, 2, N_BONES, N_FEATURES), dtype="f4")
-                h5p.create_dataset("facing", (n, t, 2, N_BONES), dtype="i4")
-            done = int(h5p.attrs["done"])
-            blocks = range(done, n, chunk)
-            if progress:
-                from tqdm import tqdm
-                blocks = tqdm(blocks, desc="bone features", unit="block")
-            for i0 in blocks:
-                i1 = min(n, i0 + chunk)
-                if n_jobs > 1:
-                    from joblib import Parallel, delayed
-                    rows = Parallel(n_jobs=n_jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m,
-                                                                           cfg, rcs_exponent)
-                                                   for i in range(i0, i1))
-                else:
-                    rows = [compute(i) for i in range(i0, i1)]
-                h5p["features"][i0:i1] = np.stack([r.features for r in rows])
-                h5p["facing"][i0:i1] = np.stack([r.facing for r in rows])
-                h5p.attrs["done"] = i1
-                h5p.flush()
-            feats, facing = h5p["features"][()], h5p["facing"][()]
-        with atomic_path(path) as tmp:
-            with h5py.File(tmp, "w") as h5:
-                h5.attrs["format"] = CACHE_FORMAT
-                h5.attrs["config_hash"] = key
-                h5.attrs["feature_names"] = list(FEATURE_NAMES)
-                h5.create_dataset("features", data=feats)
-                h5.create_dataset("facing", data=facing)
-        os.unlink(partial)
+        if cached is None:
+            cached = _build_cache(path, key, (n, t), rows, chunk, progress)
+    return cached
+
+
+def _build_cache(path: Path, key: str, shape: tuple[int, int], rows: Callable[[int, int], list[BoneFeatures]],
+                 chunk: int, progress: bool) -> BoneFeatures:
+    """Compute the N rows (``rows(i0, i1)`` -> BoneFeatures per row) block by block into
+    ``<path>.partial`` (resuming what it holds for this key), then write ``path`` atomically."""
+    n, t = shape
+    partial = path.with_name(path.name + ".partial")
+    try:
+        h5p = h5py.File(partial, "a" if partial.is_file() else "w")
+    except OSError:  # a corrupt partial file from a hard kill: start over
+        partial.unlink(missing_ok=True)
+        h5p = h5py.File(partial, "w")
+    with h5p:
+        if h5p.attrs.get("config_hash") != key or "features" not in h5p:
+            for k in list(h5p.keys()):
+                del h5p[k]
+            h5p.attrs["config_hash"] = key
+            h5p.attrs["done"] = 0
+            h5p.create_dataset("features", (n, t, 2, N_BONES, N_FEATURES), dtype="f4")
+            h5p.create_dataset("facing", (n, t, 2, N_BONES), dtype="i4")
+        blocks = range(int(h5p.attrs["done"]), n, chunk)
+        if progress:
+            from tqdm import tqdm
+            blocks = tqdm(blocks, desc="bone features", unit="block")
+        for i0 in blocks:
+            i1 = min(n, i0 + chunk)
+            block = rows(i0, i1)
+            h5p["features"][i0:i1] = np.stack([r.features for r in block])
+            h5p["facing"][i0:i1] = np.stack([r.facing for r in block])
+            h5p.attrs["done"] = i1
+            h5p.flush()
+        feats, facing = h5p["features"][()], h5p["facing"][()]
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as h5:
+            h5.attrs["format"] = CACHE_FORMAT
+            h5.attrs["config_hash"] = key
+            h5.attrs["feature_names"] = list(FEATURE_NAMES)
+            h5.create_dataset("features", data=feats)
+            h5.create_dataset("facing", data=facing)
+    os.unlink(partial)
     return BoneFeatures(feats, facing)
