@@ -166,6 +166,10 @@ class DiagnosisConfig:
 
 
 Z95 = 1.96  # a 95 % CI read as mean +- Z95 * se (the recordings estimate of an inconclusive verdict)
+# An estimate beyond this many times the rows at hand is not given: its margin is under a tenth of the
+# CI half-width, so the point estimates it extrapolates would move by more than the margin long before
+# (a gap_closed 0.0004 under the threshold asked for 355915 recordings); the two are tied at any practical size.
+MAX_ROWS_FACTOR = 100.0
 
 
 def significant(gap_closed: float, ci95: Sequence[float], min_gap_closed: float) -> bool:
@@ -178,13 +182,14 @@ def rows_to_decide(n_eval: int, ci95: Sequence[float], margin: float) -> float |
     shrinks to ``margin``, the distance from its mean to the bound it must clear: with
     se = (hi - lo) / (2 Z95) and se ~ 1/sqrt(rows), n_eval * (Z95 se / margin)^2. At least
     n_eval + 1, since n_eval rows did not decide it (a skewed percentile CI can put the symmetric
-    estimate below n_eval). None when the margin is <= 0 or a number is not finite: no number of
-    rows decides it."""
+    estimate below n_eval). None when the margin is <= 0 or a number is not finite (no number of
+    rows decides it) or when the estimate exceeds MAX_ROWS_FACTOR * n_eval (no practical number)."""
     lo, hi = float(ci95[0]), float(ci95[1])
     if not (math.isfinite(margin) and margin > 0 and math.isfinite(lo) and math.isfinite(hi)):
         return None
     se = (hi - lo) / (2.0 * Z95)
-    return max(n_eval * (Z95 * se / margin) ** 2, n_eval + 1.0)
+    rows = n_eval * (Z95 * se / margin) ** 2
+    return None if rows > MAX_ROWS_FACTOR * n_eval else max(rows, n_eval + 1.0)
 
 
 def decide(effect: str, gap_closed: float, ci95: Sequence[float], lead: float | None,
@@ -216,7 +221,8 @@ def decide(effect: str, gap_closed: float, ci95: Sequence[float], lead: float | 
     undecidable = [what for what, n in needs.items() if n is None]
     if undecidable:
         out["decides"] = (f"{' and '.join(needs)}; no estimate: the margin of {' and '.join(undecidable)} "
-                          "is <= 0 or not finite")
+                          f"is <= 0, not finite or under a tenth of its CI half-width (more than "
+                          f"{MAX_ROWS_FACTOR:g}x the {n_eval} evaluation rows: tied at any practical size)")
         return out
     rows = max(needs.values())
     out["decides"] = " and ".join(needs)
