@@ -86,11 +86,13 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
 
 @contextlib.contextmanager
-def file_lock(path: str | Path | None) -> Iterator[None]:
+def file_lock(path: str | Path | None, *, busy_error: str | None = None) -> Iterator[None]:
     """Hold an exclusive ``fcntl.flock`` on ``path`` (created if missing) for the block; None: no lock.
 
     Serialises processes that build the same file (two jobs of a sweep filling one cache, writers
-    of one SQLite database). POSIX only, like the shared file systems it is meant for.
+    of one SQLite database). ``busy_error``: do not wait; raise ``RuntimeError(busy_error)`` if
+    another process holds the lock (one live job per state folder). POSIX only, like the shared
+    file systems it is meant for.
     """
     if path is None:
         yield
@@ -100,7 +102,10 @@ def file_lock(path: str | Path | None) -> Iterator[None]:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX if busy_error is None else fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RuntimeError(busy_error) from None
         try:
             yield
         finally:

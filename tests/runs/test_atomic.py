@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
 import subprocess
 import sys
 
 import pytest
 
-from handradar.atomic import _host, atomic_path, atomic_write_text, remove_stale_parts
+from handradar.atomic import (
+    _host,
+    atomic_path,
+    atomic_write_text,
+    file_lock,
+    remove_stale_parts,
+)
 
 
 def dead_pid() -> int:
@@ -58,3 +65,16 @@ def test_unwritable_places_name_the_folder(tmp_path):
     with pytest.raises(NotADirectoryError) as info:
         atomic_write_text(tmp_path / "file" / "deeper" / "x.txt", "")
     assert info.value.filename == str(tmp_path / "file")
+
+
+def test_a_busy_lock_raises_the_given_error_instead_of_waiting(tmp_path):
+    lock = tmp_path / "state.lock"
+    with open(lock, "a") as holder:  # another holder: flock conflicts across open file descriptions
+        fcntl.flock(holder, fcntl.LOCK_EX)
+        with pytest.raises(RuntimeError, match="^another job runs$"), file_lock(lock, busy_error="another job runs"):
+            pass
+        fcntl.flock(holder, fcntl.LOCK_UN)
+    ran = []
+    with file_lock(lock, busy_error="another job runs"):  # free again: taken
+        ran.append(True)
+    assert ran == [True]

@@ -38,7 +38,7 @@ import json
 import logging
 import shutil
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +49,7 @@ from hydra.utils import instantiate
 from lightning.fabric.utilities.rank_zero import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
-from handradar.atomic import atomic_path, atomic_write_text
+from handradar.atomic import atomic_path, atomic_write_text, file_lock
 from handradar.data.datamodule import ArrayRows, FileRows, TrainingRowsDataModule
 from handradar.data.datasets import (
     ArrayDataset,
@@ -204,24 +204,11 @@ class Job:
                     self._write_outputs(results, metrics)
         return metrics
 
-    @contextlib.contextmanager
-    def _state_lock(self) -> Iterator[None]:
-        """One live job per state folder (two identical jobs would share checkpoints)."""
-        if not self.rank_zero:  # DDP ranks > 0 run inside rank 0's job
-            yield
-            return
-        import fcntl
-
-        self.state.parent.mkdir(parents=True, exist_ok=True)
-        with open(self.state.parent / f"{self.state.name}.lock", "a") as fh:
-            try:
-                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                raise RuntimeError(f"another job with the same config is running (state {self.state})") from None
-            try:
-                yield
-            finally:
-                fcntl.flock(fh, fcntl.LOCK_UN)
+    def _state_lock(self) -> contextlib.AbstractContextManager[None]:
+        """One live job per state folder (two identical jobs would share checkpoints); DDP ranks > 0
+        run inside rank 0's job."""
+        return file_lock(self.state.parent / f"{self.state.name}.lock" if self.rank_zero else None,
+                         busy_error=f"another job with the same config is running (state {self.state})")
 
     def _write_outputs(self, results: dict[str, dict], metrics: dict[str, float]) -> None:
         for name, r in results.items():
