@@ -15,7 +15,7 @@ from handradar.radar.signal import beat_signal
 from handradar.sim.cache import pack
 from handradar.sim.interp import interpolate_time, upsample_to_chirps
 from handradar.sim.profiles import combine_slots, scatterer_profiles, window_chirp_times
-from handradar.sim.scatterers import Scatterers, radar_amplitude
+from handradar.sim.scatterers import Scatterers, bone_scatterers, radar_amplitude
 from handradar.sim.simulator import Simulator
 from tests.sim.demo import window
 
@@ -230,3 +230,57 @@ def test_tracking_gap_neither_sweeps_through_the_origin_nor_reflects(radar, shor
     inside = (ct > times[21] + 1e-9) & (ct < times[24] - 1e-9)
     flat = prof[0, :19].reshape(19, -1, prof.shape[-1])
     assert inside.any() and float(flat[:, torch.as_tensor(inside)].abs().max()) == 0.0
+
+
+def test_bone_extent_splits_each_bone_into_three_points_that_sum_to_its_centre():
+    h = torch.as_tensor(standard_hand(), dtype=torch.float64) + torch.tensor([0.0, 0.0, 0.3], dtype=torch.float64)
+    joints = torch.stack([h, h + 0.1]).reshape(1, 1, 2, 21, 3)
+    mask = torch.ones(1, 1, 2, dtype=torch.bool)
+    radii = torch.full((19,), 0.008, dtype=torch.float64)
+    one = bone_scatterers(joints, mask, 0.0039, radii)
+    spread = bone_scatterers(joints, mask, 0.0039, radii, extent=0.6)
+    assert one.n_points == 38 and spread.n_points == 3 * 38
+    assert torch.equal(spread.owner, torch.arange(38).repeat(3))  # midpoints first: slots 0..37
+    torch.testing.assert_close(spread.tx[:, :, :38], one.tx)
+    axis = (joints[..., BONE_CHILD, :] - joints[..., BONE_PARENT, :]).reshape(1, 1, 38, 3)
+    torch.testing.assert_close(spread.tx[:, :, 38:76], one.tx - 0.2 * axis)  # -+ e L / 3 along the bone
+    torch.testing.assert_close(spread.tx[:, :, 76:], one.tx + 0.2 * axis)
+    # a third of the amplitude each: three in phase sum to the single centre's amplitude
+    torch.testing.assert_close(3 * spread.rcs_m2[:, :, :38].sqrt(), one.rcs_m2.sqrt())
+    assert torch.equal(bone_scatterers(joints, mask, 0.0039, radii, extent=0.0).tx, one.tx)
+    with pytest.raises(ValueError, match="bone extent must be in"):
+        bone_scatterers(joints, mask, 0.0039, radii, extent=1.5)
+
+
+@pytest.mark.parametrize("extent", [0.0, 1.0])
+def test_rotating_bone_doppler_lines_at_the_closed_form_rows_of_its_points(radar, short_chain, extent):
+    # the middle finger's proximal bone (8) turns at omega about its parent joint, broadside to the radar
+    # (bone along x, line of sight along z) at the first STFT column's centre; the point at distance s
+    # from the joint moves away at s omega cos(phi), so each of its points draws its own Doppler line
+    bone, omega, z0 = 8, 20.0, 0.3
+    times = _steps(radar, short_chain)
+    h = standard_hand().astype(np.float64)
+    p, c = h[BONE_PARENT[bone]], h[BONE_CHILD[bone]]
+    e1 = (c - p) / np.linalg.norm(c - p)
+    e2 = np.cross(e1, [0.0, 0.0, 1.0])
+    e2 /= np.linalg.norm(e2)
+    local = (h - p) @ np.stack([e1, e2, np.cross(e1, e2)]).T  # the bone along local x
+    length = float(np.linalg.norm(c - p))
+    t_c = float(window_chirp_times(radar, short_chain)[0, : short_chain.stft_len, 0].mean())
+    phi = omega * (times - t_c)
+    cos, sin = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    pos = np.zeros((len(times), 2, 21, 3))
+    pos[:, 0, :, 0] = local[:, 0] * cos - local[:, 2] * sin
+    pos[:, 0, :, 1] = local[:, 1]
+    pos[:, 0, :, 2] = z0 + local[:, 0] * sin + local[:, 2] * cos
+    mask = np.zeros((1, len(times), 2), bool)
+    mask[..., 0] = True
+    w = torch.zeros(1, len(times), 38)
+    w[..., bone] = 1.0
+    sim = Simulator(radar, short_chain, bone_extent=extent)
+    column = sim(torch.as_tensor(pos[None], dtype=torch.float32), torch.as_tensor(mask), w)[0, :, 0].numpy()
+    offsets = [0.0] if extent == 0 else [0.0, -extent / 3, extent / 3]
+    rows_per_mps = short_chain.stft_len * radar.loop_period_s * 2 / radar.wavelength_m
+    expected = sorted(round(-(0.5 + o) * length * omega * rows_per_mps) + short_chain.stft_len // 2 for o in offsets)
+    peaks = [r for r in range(1, len(column) - 1) if column[r] >= max(column[r - 1], column[r + 1]) and column[r] > 0.8]
+    assert peaks == expected

@@ -4,7 +4,9 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
 
 1. split the rows, seeded and stratified by gesture, into a calibration and an evaluation split;
    calibrate the baseline: the aspect exponent of its cylinder RCS (handradar.sim.rcs; 1 = the
-   paper's formula) that fits the calibration split best (``rcs_exponents``). This generic
+   paper's formula) that fits the calibration split best (``rcs_exponents``), jointly with the
+   bones' extent along their length (``bone_extents``; handradar.sim.scatterers; [0.0], the default:
+   the paper's one centre per bone, not fitted). This generic
    calibration comes first so that candidates are scored on the gap it leaves: without it, any
    candidate that adds slow, broad returns (a palm disc, radar-table image paths) closes part of the generic
    "the cylinders are too specular" gap in every data set and wins where its effect is absent.
@@ -83,7 +85,7 @@ from handradar.gap.data import GapData
 from handradar.gap.engine import Variant, VariantEngine, merge
 from handradar.gap.fit import (
     GridFit,
-    calibrate_rcs_exponent,
+    calibrate_settings,
     effect_grid,
     fit_baseline_effects,
     grid_fit,
@@ -125,6 +127,7 @@ class DiagnosisConfig:
     candidates: list[str] | None = None  # None: every effect not in the baseline simulator
     rcs_exponents: list[float] | None = field(default_factory=lambda: [1.0, 0.75, 0.5, 0.25, 0.1, 0.0])
     # the baseline's cylinder RCS aspect exponents tried (None or [1.0]: the paper's RCS, uncalibrated)
+    bone_extents: list[float] | None = None  # with each exponent (None or [0.0]: one centre per bone, not fitted)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
     noise_draws: int = 4  # a noise effect's draws averaged in power: compare with its expected spectrogram
     fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
@@ -153,10 +156,11 @@ class DiagnosisConfig:
                              f"{sorted(cls.__dataclass_fields__)}")
         if cfg.get("candidates") is not None:
             cfg["candidates"] = [str(c) for c in cfg["candidates"]]
-        if cfg.get("rcs_exponents") is not None:
-            cfg["rcs_exponents"] = [float(e) for e in cfg["rcs_exponents"]]
-            if not cfg["rcs_exponents"] or not all(0.0 <= e <= 1.0 for e in cfg["rcs_exponents"]):
-                raise ValueError(f"diagnose.rcs_exponents: values in [0, 1] expected, found {cfg['rcs_exponents']}")
+        for name in ("rcs_exponents", "bone_extents"):
+            if cfg.get(name) is not None:
+                cfg[name] = [float(e) for e in cfg[name]]
+                if not cfg[name] or not all(0.0 <= e <= 1.0 for e in cfg[name]):
+                    raise ValueError(f"diagnose.{name}: values in [0, 1] expected, found {cfg[name]}")
         if int(cfg.get("noise_draws", 1)) < 1:
             raise ValueError(f"diagnose.noise_draws must be >= 1, found {cfg['noise_draws']}")
         if cfg.get("grids") is not None:
@@ -511,13 +515,13 @@ class _Steps:
         """Step 0 on one fold's fitting rows: the RCS exponent, then the baseline's own effects given it."""
         cfg, d = self.cfg, self.data
         build, calibration = self.build, {"rcs_exponent": 1.0, "grid": []}
-        if self.exponents != [1.0]:
-            with _bar(len(fold.fit_idx) * len(self.exponents), "step 0: calibrate the RCS exponent", self.progress) as bar:
-                best, scores = calibrate_rcs_exponent(build, self.base, d.rows, fold.fit_idx, d.measured,
-                                                      self.exponents, batch_size=cfg.batch_size, progress=bar.update)
-            calibration = {"rcs_exponent": best,
-                           "grid": [{"rcs_exponent": e, "ssim": sc} for e, sc in zip(self.exponents, scores)]}
-            build = build.replace(rcs_exponent=best)
+        if len(self.generic_grid) > 1 or self.generic_grid[0] != {"rcs_exponent": 1.0}:
+            with _bar(len(fold.fit_idx) * len(self.generic_grid), "step 0: calibrate the generic settings",
+                      self.progress) as bar:
+                best, scores = calibrate_settings(build, self.base, d.rows, fold.fit_idx, d.measured,
+                                                  self.generic_grid, batch_size=cfg.batch_size, progress=bar.update)
+            calibration = {**best, "grid": [{**point, "ssim": sc} for point, sc in zip(self.generic_grid, scores)]}
+            build = build.replace(**best)
         with _bar(len(fold.fit_idx) * len(self.base), "step 0: fit the baseline's effects", self.progress) as bar:
             base, fits = fit_baseline_effects(build, self.base, d.rows, fold.fit_idx, d.measured, grids=cfg.grids,
                                               batch_size=cfg.batch_size, progress=bar.update)
@@ -531,14 +535,18 @@ class _Steps:
         baseline. The reported baseline is the last fold's (the parameter fit)."""
         if "occlusion" in self.base:  # the baseline simulated below then needs visibility
             self.bone_features(self.base_sim)
-        self.exponents = list(self.cfg.rcs_exponents or [1.0])
+        # step 0's grid: every exponent with every extent; the extent is left out of the points (and of
+        # the report) while only the paper's 0 is tried
+        extents = list(self.cfg.bone_extents or [0.0])
+        self.generic_grid = [{"rcs_exponent": e, **({"bone_extent": x} if extents != [0.0] else {})}
+                             for e in (self.cfg.rcs_exponents or [1.0]) for x in extents]
         for fold in self.folds:
             self.calibrate_fold(fold)
         reported = self.folds[-1]
         self.build, self.base, self.calibration = reported.build, reported.base, dict(reported.calibration)
         if len(self.folds) > 1:
-            self.calibration["folds"] = [{k: f.calibration[k] for k in ("rcs_exponent", "effects")}
-                                         for f in self.scored]
+            self.calibration["folds"] = [{k: f.calibration[k] for k in ("rcs_exponent", "bone_extent", "effects")
+                                          if k in f.calibration} for f in self.scored]
         self.base_sim = self.build(self.base)
 
     def cache(self) -> None:
@@ -642,7 +650,8 @@ class _Steps:
                        "selection": self.selection,
                        "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
                                     "folds": cfg.folds, "fit_rows": int(len(self.folds[-1].fit_idx)),
-                                    "refine_steps": cfg.refine_steps, "rcs_exponents": self.exponents,
+                                    "refine_steps": cfg.refine_steps, "rcs_exponents": list(cfg.rcs_exponents or [1.0]),
+                                    **({"bone_extents": cfg.bone_extents} if cfg.bone_extents not in (None, [0.0]) else {}),
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
                                     "min_gap_closed": cfg.min_gap_closed}}
 

@@ -6,7 +6,7 @@ their grids, then optional gradient steps.
         ``overrides[name][param]`` (bounds checked)
     in_vocabulary_order(names) -> [name]
         effect names in the vocabulary's order (handradar.vocab.EFFECTS), then any others sorted
-    calibrate_rcs_exponent(build, base, rows, idx, measured, exponents) -> (best exponent, [mean SSIM])
+    calibrate_settings(build, base, rows, idx, measured, grid [{setting: value}]) -> (best point, [mean SSIM])
         the aspect exponent of the cylinder RCS (handradar.sim.rcs) that makes the baseline simulator
         closest to the measured rows
     fit_baseline_effects(build, base, rows, idx, measured, grids=None) -> (fitted base, {effect: GridFit})
@@ -73,17 +73,19 @@ def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:
     return float(per_example_ssim(target, torch.as_tensor(spec)).mean())
 
 
-def calibrate_rcs_exponent(build: SimFactory, base: Mapping, rows: RowSet, idx: np.ndarray, measured: np.ndarray,
-                           exponents: Sequence[float], *, batch_size: int = 8,
-                           progress: Callable[[int], None] | None = None) -> tuple[float, list[float]]:
-    """The cylinder RCS aspect exponent (of ``exponents``) under which the baseline simulator scores the
-    highest mean SSIM on rows ``idx``, and the score of each exponent."""
+def calibrate_settings(build: SimFactory, base: Mapping, rows: RowSet, idx: np.ndarray, measured: np.ndarray,
+                       grid: Sequence[Mapping[str, float]], *, batch_size: int = 8,
+                       progress: Callable[[int], None] | None = None) -> tuple[dict[str, float], list[float]]:
+    """The generic simulator settings (of ``grid``: e.g. ``{"rcs_exponent": 0.5, "bone_extent": 1.0}``
+    per point) under which the baseline simulator scores the highest mean SSIM on rows ``idx``, and the
+    score of each point (ties: the first)."""
     target = torch.as_tensor(measured[idx])
     scores = []
-    for e in exponents:
-        engine = VariantEngine(build.replace(rcs_exponent=float(e)), base, rows, batch_size=batch_size)
+    for point in grid:
+        engine = VariantEngine(build.replace(**{k: float(v) for k, v in point.items()}), base, rows,
+                               batch_size=batch_size)
         scores.append(_mean_ssim(target, engine.spectrograms([{}], idx, progress=progress)[0]))
-    return float(exponents[int(np.argmax(scores))]), scores
+    return {k: float(v) for k, v in grid[int(np.argmax(scores))].items()}, scores
 
 
 def fit_baseline_effects(build: SimFactory, base: Mapping[str, Mapping[str, float]], rows: RowSet, idx: np.ndarray,

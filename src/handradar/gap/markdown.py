@@ -12,14 +12,20 @@ def _params(p: dict) -> str:
 
 
 def _calibration(cal: dict | None) -> str:
-    """Step 0 (the RCS exponent, the baseline's own effects), as a clause of the baseline line."""
+    """Step 0 (the RCS exponent, the bones' extent if fitted, the baseline's own effects), as a clause of the baseline line."""
     cal = cal or {}
     if not cal.get("grid"):
         text = " (the paper's cylinder RCS, not calibrated)"
     else:
-        tried = ", ".join(f"{g['rcs_exponent']:g}: {fmt_number(g['ssim'])}" for g in cal["grid"])
-        text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
-                f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
+        if "bone_extent" in cal:  # a joint grid: (exponent, extent) per point
+            tried = ", ".join(f"({g['rcs_exponent']:g}, {g['bone_extent']:g}): {fmt_number(g['ssim'])}" for g in cal["grid"])
+            text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} and the bones' "
+                    f"extent to {cal['bone_extent']:g} of their length on the calibration rows (mean SSIM there by "
+                    f"(exponent, extent): {tried}; (1, 0) = the paper's model)")
+        else:
+            tried = ", ".join(f"{g['rcs_exponent']:g}: {fmt_number(g['ssim'])}" for g in cal["grid"])
+            text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
+                    f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
     if cal.get("effects"):
         text += ("; the baseline's own effects fitted there on their grids: "
                  + "; ".join(f"{k} {_params(v)}" for k, v in cal["effects"].items()))

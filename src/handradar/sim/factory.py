@@ -1,7 +1,7 @@
 """The one place simulators are built: :class:`SimFactory`, from the ``sim`` config.
 
-Every setting (the hand model, the skeleton rate, amplitudes, the cylinder RCS aspect exponent,
-the effects with their parameters, the draws a noise effect averages) is fixed when a simulator is
+Every setting (the hand model, the skeleton rate, amplitudes, the cylinder RCS aspect exponent, the
+bones' extent, the effects with their parameters, the draws a noise effect averages) is fixed when a simulator is
 constructed; nothing mutates a built simulator. A variant with other settings is a new factory
 (:meth:`SimFactory.replace`), so every simulator passes the constructor's checks and its
 :meth:`~handradar.sim.simulator.Simulator.key` (which the caches use) says what it is.
@@ -29,7 +29,8 @@ from handradar.sim.simulator import Simulator
 # Effects with their parameters: {effect name: {parameter: value}} (also the gap diagnosis's variants).
 EffectSet = Mapping[str, Mapping[str, Any]]
 
-SETTINGS = ("hand", "skeleton_rate_hz", "tx_power_w", "gain_tx_dbi", "gain_rx_dbi", "rcs_exponent", "compile_combine")
+SETTINGS = ("hand", "skeleton_rate_hz", "tx_power_w", "gain_tx_dbi", "gain_rx_dbi", "rcs_exponent", "bone_extent",
+            "compile_combine")
 # keys of a sim config that are not settings: Hydra's, and the two that become ``effects``
 _NOT_SETTINGS = {"_target_", "_partial_", "_recursive_", "_convert_", "effects", "effect_params", "noise_draws",
                  "from_report"}
@@ -101,6 +102,10 @@ class SimFactory:
     @property
     def rcs_exponent(self) -> float:
         return float(self.settings.get("rcs_exponent", 1.0))
+
+    @property
+    def bone_extent(self) -> float:
+        return float(self.settings.get("bone_extent", 0.0))
 
     def __call__(self, effects: EffectSet | None = None) -> Simulator:
         """A new simulator with ``effects`` (default: the factory's own) and the factory's settings."""

@@ -6,7 +6,7 @@ Pipeline of one batch (every step torch, differentiable end to end):
       -> skeleton-stage effects (tracking_jitter, sync_offset)
       -> untracked steps of a partly tracked hand hold its last tracked pose (hold_untracked)
       -> standard-hand retargeting (handradar.hand.retarget; HandModelConfig.retarget)
-      -> one scattering centre per bone at its midpoint, cylinder RCS (sim.scatterers)
+      -> one scattering centre per bone at its midpoint (or three along it: bone_extent), cylinder RCS (sim.scatterers)
       -> scatterer-stage effects (palm, forearm, occlusion, multipath, antenna_pattern)
       -> per-slot range profiles at the true chirp times (sim.profiles)      (B, 39, F, L, Ch, bins)
       -> weighted sum with RadarWeightNet weights (or 1)                      (B, F, L, Ch, bins)
@@ -24,8 +24,10 @@ Public API:
 
     Simulator(radar, chain, *, hand=HandModelConfig(), effects=(), effect_params=None,
               skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5,
-              rcs_exponent=1.0, compile_combine=False)
+              rcs_exponent=1.0, bone_extent=0.0, compile_combine=False)
       rcs_exponent: aspect exponent of every cylinder's RCS (handradar.sim.rcs; 1 = the paper's)
+      bone_extent: fraction of each bone's length its reflection is spread over (handradar.sim.scatterers;
+            0 = the paper's single centre at the midpoint)
       compile_combine: torch.compile the weighted sum (see profiles.combine_slots)
       .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
       .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
@@ -87,7 +89,7 @@ class Simulator(nn.Module):
     def __init__(self, radar: RadarConfig, chain: ChainConfig, *, hand: HandModelConfig | None = None,
                  effects: list | tuple = (), effect_params: dict | None = None, skeleton_rate_hz: float = 100.0,
                  tx_power_w: float = 0.0158, gain_tx_dbi: float = 10.5, gain_rx_dbi: float = 10.5,
-                 rcs_exponent: float = 1.0, compile_combine: bool = False) -> None:
+                 rcs_exponent: float = 1.0, bone_extent: float = 0.0, compile_combine: bool = False) -> None:
         super().__init__()
         self.radar, self.chain = radar, chain
         self.hand = hand if isinstance(hand, HandModelConfig) else HandModelConfig(**dict(hand or {}))
@@ -97,6 +99,9 @@ class Simulator(nn.Module):
         self.rcs_exponent = float(rcs_exponent)
         if not 0.0 <= self.rcs_exponent <= 1.0:
             raise ValueError(f"rcs_exponent must be in [0, 1] (1: the paper's cylinder RCS), found {rcs_exponent}")
+        self.bone_extent = float(bone_extent)
+        if not 0.0 <= self.bone_extent <= 1.0:
+            raise ValueError(f"bone_extent must be in [0, 1] (0: the paper's one centre per bone), found {bone_extent}")
         self.effects = nn.ModuleList(build_effects(list(effects), dict(effect_params or {})))
         self.register_buffer("chirp_times", torch.as_tensor(window_chirp_times(radar, chain), dtype=torch.float64),
                              persistent=False)
@@ -109,6 +114,7 @@ class Simulator(nn.Module):
         """Everything that determines this simulator's output, for cache keys (handradar.provenance.config_hash)."""
         return {"radar": self.radar, "chain": self.chain, "hand": self.hand.key(), "skeleton_rate_hz": self.skeleton_rate_hz,
                 "amplitude": (self.tx_power_w, self.gain_tx_dbi, self.gain_rx_dbi), "rcs_exponent": self.rcs_exponent,
+                **({"bone_extent": self.bone_extent} if self.bone_extent else {}),
                 "effects": [(e.name, e.values(), e.settings()) for e in self.effects]}
 
     def effect(self, name: str) -> Effect:
@@ -156,8 +162,9 @@ class Simulator(nn.Module):
         return self._profiles(ctx)
 
     def scatterers(self, ctx: SimContext) -> Scatterers:
-        """The reflection points of a context: one per bone, then the scatterer-stage effects."""
-        scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii, self.rcs_exponent)
+        """The reflection points of a context: the bones', then the scatterer-stage effects."""
+        scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii, self.rcs_exponent,
+                               self.bone_extent)
         for e in self._stage("scatterers"):
             scat = e.apply_scatterers(scat, ctx)
         return scat
