@@ -9,7 +9,7 @@ STAMP       := $(VENV)/.installed
 JOBS        ?= 2
 ARGS        ?=
 
-.PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark gap-benchmark-heldout fetch-data clean
+.PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark gap-benchmark-heldout gap-benchmark-36 gap-benchmark-36-heldout fetch-data clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-15s %s\n", $$1, $$2}'
@@ -54,6 +54,12 @@ gap-benchmark: $(STAMP) ## the withheld-effect validation of the gap diagnosis
 
 gap-benchmark-heldout: $(STAMP) ## ... judged on the held-out world's physics (settings frozen)
 	$(PY) diagnose.py +experiment=gap_benchmark_heldout $(ARGS)
+
+gap-benchmark-36: $(STAMP) ## the gap benchmark at a user's data size: 36 recordings per case, 3-fold cross-fitting
+	$(PY) diagnose.py +experiment=gap_benchmark_36 $(ARGS)
+
+gap-benchmark-36-heldout: $(STAMP) ## ... judged on the held-out world's physics (settings frozen)
+	$(PY) diagnose.py +experiment=gap_benchmark_36_heldout $(ARGS)
 
 fetch-data: $(STAMP) ## SFINGE3D into data/sfinge3d (git clone; DHG: handradar-fetch dataset=dhg fetch.url=URL)
 	$(VENV)/bin/handradar-fetch dataset=sfinge3d $(ARGS)

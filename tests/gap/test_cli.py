@@ -51,6 +51,14 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     assert h.diagnose == b.diagnose and h.sim == b.sim and h.hand == b.hand and h.benchmark.cases == b.benchmark.cases
     assert h.world.seed != b.world.seed and h.world.scene != b.world.scene and h.world.effects != b.world.effects
     assert h.benchmark.results_md.endswith("gap_benchmark_heldout.md") and h.benchmark.figure != b.benchmark.figure
+    # the 36-recording presets: the frozen diagnosis with 3-fold cross-fitting, 6 x 2 x 3 recordings per case
+    s, sh = _compose(["+experiment=gap_benchmark_36"]), _compose(["+experiment=gap_benchmark_36_heldout"])
+    OmegaConf.resolve(s), OmegaConf.resolve(sh)
+    assert s.diagnose == OmegaConf.merge(b.diagnose, {"folds": 3}) and s.sim == b.sim and s.benchmark.cases == b.benchmark.cases
+    w = s.benchmark.world
+    assert len(w.gestures) * w.subjects * len(s.world.angles_deg) * w.repetitions == 36
+    assert sh.diagnose == s.diagnose and sh.benchmark.world == w and sh.world.seed == h.world.seed
+    assert len({m.benchmark.results_md for m in (b, h, s, sh)}) == 4 and len({m.benchmark.figure for m in (b, h, s, sh)}) == 4
 
 
 @pytest.mark.slow

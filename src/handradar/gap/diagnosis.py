@@ -512,7 +512,8 @@ class _Steps:
                         "(use 30 or more)", len(self.ev))
 
     def calibrate_fold(self, fold: Fold) -> None:
-        """Step 0 on one fold's fitting rows: the RCS exponent, then the baseline's own effects given it."""
+        """Step 0 on one fold's fitting rows: the generic settings (RCS exponent, bone extent), then the
+        baseline's own effects given them."""
         cfg, d = self.cfg, self.data
         build, calibration = self.build, {"rcs_exponent": 1.0, "grid": []}
         if len(self.generic_grid) > 1 or self.generic_grid[0] != {"rcs_exponent": 1.0}:
@@ -530,7 +531,7 @@ class _Steps:
         fold.build, fold.base, fold.calibration = build, base, calibration
 
     def calibrate(self) -> None:
-        """Step 0 (module doc) before any candidate is scored, in every fold: the RCS exponent, then the
+        """Step 0 (module doc) before any candidate is scored, in every fold: the generic settings, then the
         parameters of the baseline's own effects given it; the fitted values replace the defaults in the
         baseline. The reported baseline is the last fold's (the parameter fit)."""
         if "occlusion" in self.base:  # the baseline simulated below then needs visibility
