@@ -17,6 +17,7 @@ from handradar.gap.benchmark import (
     results_markdown,
     run_benchmark,
     score,
+    split_text,
     turned,
 )
 from handradar.vocab import EFFECTS as EFFECT_NAMES
@@ -76,6 +77,11 @@ def _spectrogram_file(path, spec):
     with h5py.File(path, "w") as f:
         f["spectrograms"] = np.clip(spec, 0.0, 1.0).astype(np.float32)
     return path
+
+
+def test_settings_line_says_how_the_rows_were_used():
+    assert split_text({"calibration_fraction": 0.6}) == "calibration fraction 0.6"
+    assert split_text({"folds": 3, "calibration_fraction": 0.5}) == "cross-fitting in 3 folds, every row scored out of fold"
 
 
 def test_layout_oracle_credits_a_systematic_effect_and_not_speckle(tmp_path):

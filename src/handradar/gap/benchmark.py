@@ -199,6 +199,14 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds}
 
 
+def split_text(diag_cfg: Mapping) -> str:
+    """How the benchmark's diagnoses used the rows: one split, or cross-fitting."""
+    folds = int(diag_cfg.get("folds", 1))
+    if folds > 1:
+        return f"cross-fitting in {folds} folds, every row scored out of fold"
+    return f"calibration fraction {diag_cfg.get('calibration_fraction', 0.5)}"
+
+
 def _attributed(r: Mapping) -> str:
     """A case's answer; an inconclusive one with the recordings estimated to decide it."""
     if r["cause"] != "inconclusive":
@@ -249,7 +257,7 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
     lines += ["", f"![confusion]({figure})", "",
               f"Settings: {settings.get('rows')} rows per world ({settings.get('split')}), "
               f"{settings.get('fit_rows')} calibration rows score the grid, seed {settings.get('seed')}; "
-              f"wall time {settings.get('minutes', 0):.1f} min on {settings.get('threads')} threads "
+              f"wall time {settings.get('minutes', 0):.1f} min on {settings.get('threads')} thread(s) "
               f"(code {settings.get('code_version')}).", ""]
     return "\n".join(lines)
 
@@ -319,7 +327,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         import torch
 
         n_rows = results[0]["rows"] if results else 0
-        settings = {"rows": n_rows, "split": f"calibration fraction {diag_cfg.get('calibration_fraction', 0.5)}",
+        settings = {"rows": n_rows, "split": split_text(diag_cfg),
                     "fit_rows": diag_cfg.get("fit_rows") or "all", "seed": diag_cfg.get("seed", 0),
                     "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
                     "code_version": code_version()}
