@@ -17,15 +17,16 @@ def _calibration(cal: dict | None) -> str:
     if not cal.get("grid"):
         text = " (the paper's cylinder RCS, not calibrated)"
     else:
-        if "bone_extent" in cal:  # a joint grid: (exponent, extent) per point
-            tried = ", ".join(f"({g['rcs_exponent']:g}, {g['bone_extent']:g}): {fmt_number(g['ssim'])}" for g in cal["grid"])
-            text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} and the bones' "
-                    f"extent to {cal['bone_extent']:g} of their length on the calibration rows (mean SSIM there by "
-                    f"(exponent, extent): {tried}; (1, 0) = the paper's model)")
-        else:
-            tried = ", ".join(f"{g['rcs_exponent']:g}: {fmt_number(g['ssim'])}" for g in cal["grid"])
-            text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g} on the calibration "
-                    f"rows (mean SSIM there by exponent: {tried}; 1 = the paper's RCS)")
+        joint = "bone_extent" in cal  # a joint grid: (exponent, extent) per point
+
+        def point(g: dict) -> str:
+            return f"({g['rcs_exponent']:g}, {g['bone_extent']:g})" if joint else f"{g['rcs_exponent']:g}"
+
+        tried = ", ".join(f"{point(g)}: {fmt_number(g['ssim'])}" for g in cal["grid"])
+        extent = f" and the bones' extent to {cal['bone_extent']:g} of their length" if joint else ""
+        axes, paper = ("(exponent, extent)", "(1, 0) = the paper's model") if joint else ("exponent", "1 = the paper's RCS")
+        text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g}{extent} on the "
+                f"calibration rows (mean SSIM there by {axes}: {tried}; {paper})")
     if cal.get("effects"):
         text += ("; the baseline's own effects fitted there on their grids: "
                  + "; ".join(f"{k} {_params(v)}" for k, v in cal["effects"].items()))

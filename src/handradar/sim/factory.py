@@ -103,10 +103,6 @@ class SimFactory:
     def rcs_exponent(self) -> float:
         return float(self.settings.get("rcs_exponent", 1.0))
 
-    @property
-    def bone_extent(self) -> float:
-        return float(self.settings.get("bone_extent", 0.0))
-
     def __call__(self, effects: EffectSet | None = None) -> Simulator:
         """A new simulator with ``effects`` (default: the factory's own) and the factory's settings."""
         chosen = self.effects if effects is None else {str(k): dict(v or {}) for k, v in effects.items()}

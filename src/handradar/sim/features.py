@@ -148,7 +148,7 @@ def cached_bone_features(positions: np.ndarray, times: np.ndarray, masks: np.nda
     def rows(i0: int, i1: int, jobs: int = n_jobs) -> list[BoneFeatures]:
         if jobs > 1:
             from joblib import Parallel, delayed
-            return Parallel(n_jobs=n_jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m, cfg,
+            return Parallel(n_jobs=jobs)(delayed(bone_features)(positions[i], times, masks[i], wavelength_m, cfg,
                                                                   rcs_exponent) for i in range(i0, i1))
         return [bone_features(positions[i], times, masks[i], wavelength_m, cfg, rcs_exponent) for i in range(i0, i1)]
 
