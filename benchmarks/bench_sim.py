@@ -2,9 +2,9 @@
 
 - cold: everything from the skeleton: retargeting, ray-cast visibility and the per-bone features
   (HandModelConfig defaults), per-slot profiles, RadarWeightNet forward, weighted sum, chain; one
-  window at a time, then 32 windows as synthesis runs them (bone features in 2 joblib processes of
-  one thread each, written to a fresh feature cache; profiles, net and chain in batches of 8), the
-  figure a user's synthesis sees;
+  window at a time, then 32 windows as ``handradar-synth`` runs them (bone features in 2 joblib
+  processes of one thread each and slot profiles, each into a fresh cache; net and chain over
+  batches read back from the cache), the figure a user's synthesis sees;
 - cached: per-slot profiles (float16 cache layout, or float32 as DataLoader workers would hand
   them over) and features already in memory, per batch of 64: RadarWeightNet forward + linear
   upsampling to the chirp times + weighted sum + chain; for batches of two-hand and of one-hand
@@ -40,9 +40,15 @@ from handradar.metrics import fast_ssim_loss
 from handradar.models.radar_weight_net import RadarWeightNet
 from handradar.provenance import REPO_ROOT
 from handradar.radar.chain import ChainConfig
-from handradar.sim.cache import pack
+from handradar.sim.cache import (
+    DatasetCaches,
+    SlotProfileCache,
+    cache_slot_profiles,
+    pack,
+)
 from handradar.sim.features import FEATURE_NAMES, bone_features, cached_bone_features
 from handradar.sim.simulator import Simulator
+from handradar.synthesis.fit import predict_cached
 from tests.sim.demo import window
 
 BATCH = 64
@@ -90,29 +96,26 @@ def _cold(windows, times, radar, hand, sim, net) -> list[Result]:
 
 
 def _cold_pipeline(times, radar, hand, sim, net, n_windows: int = 32, n_jobs: int = 2) -> Result:
-    """Skeleton -> spectrogram for ``n_windows`` windows as synthesis runs them (handradar.sim.cache):
-    bone features in blocks of 16 rows over ``n_jobs`` joblib processes of one thread each (written
-    to a fresh feature cache), then slot profiles, RadarWeightNet and the chain in batches of 8 in
-    this process. Both cores work, unlike in the one-window-at-a-time figure."""
+    """Skeleton -> spectrogram for ``n_windows`` windows as ``handradar-synth`` runs them
+    (synthesize_source): bone features in blocks of 16 rows over ``n_jobs`` joblib processes of one
+    thread each, written to a fresh feature cache; slot profiles one window at a time into a fresh
+    profile cache; then RadarWeightNet, weighted sum and chain over batches read back from it."""
     rows = [window(times, hands=1 + i % 2, seed=i) for i in range(n_windows)]
     pos, masks = np.stack([r[0] for r in rows]), np.stack([r[1] for r in rows])
 
     def pipeline(cache_dir):
-        feats = torch.as_tensor(cached_bone_features(pos, times, masks, radar.wavelength_m, hand, cache_dir,
-                                                     n_jobs=n_jobs).features)
-        with torch.no_grad():
-            for b in range(0, n_windows, 8):
-                sk, mk = torch.as_tensor(pos[b:b + 8]), torch.as_tensor(masks[b:b + 8])
-                sim.spectrogram(sim.combine(sim.slot_profiles(sk, mk), net(feats[b:b + 8], mk)))
+        feats = cached_bone_features(pos, times, masks, radar.wavelength_m, hand, cache_dir, n_jobs=n_jobs)
+        profiles = SlotProfileCache(cache_slot_profiles(sim, pos, masks, cache_dir, times=times))
+        predict_cached(sim, net, DatasetCaches(feats, masks, times, profiles), np.arange(n_windows))
 
     repeat = int(os.environ.get("HANDRADAR_BENCH_COLD_REPEAT", "3"))
     with tempfile.TemporaryDirectory() as tmp:
-        runs = iter(range(repeat + 1))  # a fresh (cold) feature cache per timed run
+        runs = iter(range(repeat + 1))  # fresh (cold) caches per timed run
         pipeline(f"{tmp}/warm")  # starts the worker processes
         t = best_time(lambda: pipeline(f"{tmp}/{next(runs)}"), repeat=repeat)
     return Result(f"cold, {n_windows} windows as synthesis runs them", n_windows / t, "spectrograms/s",
-                  f"features in {n_jobs} processes x 1 thread, then profiles + net + chain in batches of 8 "
-                  f"({torch.get_num_threads()} threads)")
+                  f"features in {n_jobs} processes x 1 thread, profiles per window into the cache, then net + chain "
+                  f"in batches of 32 ({torch.get_num_threads()} threads)")
 
 
 def run() -> list[Result]:

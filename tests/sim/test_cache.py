@@ -30,7 +30,7 @@ def test_pack_round_trip():
 def test_cache_round_trip_and_reuse(radar, short_chain, tmp_path, monkeypatch):
     sk, mk = _data(radar, short_chain)
     sim = Simulator(radar, short_chain)
-    path = cache_slot_profiles(sim, sk, mk, tmp_path, batch_size=2)
+    path = cache_slot_profiles(sim, sk, mk, tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == [path.name]  # the temporary file is gone
     cache = SlotProfileCache(path)
     assert cache.n == 3
@@ -41,6 +41,11 @@ def test_cache_round_trip_and_reuse(radar, short_chain, tmp_path, monkeypatch):
     spec_cache = sim.spectrogram(sim.combine(packed, w, scale=scale, active=active.any(0)))
     spec_direct = sim.spectrogram(sim.combine(direct, w))
     assert (spec_cache - spec_direct).abs().max() < 0.01
+    # only the non-zero slots are stored: 19 chunks per tracked hand (examples 0 and 2: one hand)
+    import h5py
+
+    with h5py.File(path, "r") as h5:
+        assert h5["profiles"].id.get_num_chunks() == 19 * int(mk.any(1).sum()) == 19 + 38 + 19
     # same inputs and settings: no recomputation
     monkeypatch.setattr(Simulator, "slot_profiles", lambda *a, **k: (_ for _ in ()).throw(AssertionError("recomputed")))
     assert cache_slot_profiles(sim, sk, mk, tmp_path) == path
@@ -63,7 +68,7 @@ def test_interrupted_cache_leaves_nothing(radar, short_chain, tmp_path, monkeypa
 
     monkeypatch.setattr(Simulator, "slot_profiles", flaky)
     with pytest.raises(KeyboardInterrupt):
-        cache_slot_profiles(sim, sk, mk, tmp_path, batch_size=1)
+        cache_slot_profiles(sim, sk, mk, tmp_path)
     assert list(tmp_path.iterdir()) == []
 
 

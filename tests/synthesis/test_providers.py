@@ -23,6 +23,8 @@ from handradar.synthesis.fit import (
     fit_weight_net,
     load_pairs,
     load_weight_net,
+    predict,
+    predict_cached,
     save_weight_net,
     synth_scores,
 )
@@ -88,6 +90,9 @@ def test_weight_net_learns_what_the_model_lacks(measured, radar, short_chain, tm
     assert before["ssim_enhanced"] == pytest.approx(before["ssim_model"], abs=0.01)  # starts at the plain model
     assert after["ssim_enhanced"] > after["ssim_model"] + 0.02
     assert after["mse_enhanced"] < after["mse_model"]
+    # streamed from the float16 cache in batches: the in-memory (unpacked) prediction
+    streamed = predict_cached(sim, net, caches, rows[10:], batch_size=4)
+    assert float((streamed - predict(sim, net, test)).abs().max()) < 1e-3
     # the checkpoint round-trips
     f = save_weight_net(tmp_path / "rwn.pt", net, sim, {"hidden": 32, "fc": (32, 32)})
     net2, info = load_weight_net(f)

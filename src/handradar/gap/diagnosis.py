@@ -563,7 +563,7 @@ class _Steps:
             vis = d.rows.visibility if "occlusion" in self.base else None
             self.profiles = SlotProfileCache(cache_slot_profiles(
                 sim, d.rows.skeletons, d.rows.masks, self.cache_dir, times=d.rows.times, visibility=vis,
-                batch_size=cfg.batch_size, progress=self.progress))
+                progress=self.progress))
             self.rwn_fold.profiles = self.profiles.profiles
 
     def which(self) -> None:

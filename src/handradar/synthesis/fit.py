@@ -18,6 +18,7 @@ Public API:
     SynthFitModule(sim, net, phases)                                     the LightningModule
     fit_weight_net(sim, train: Pairs, *, phases, seed, ...) -> RadarWeightNet   the one training loop
     predict(sim, net | None, pairs, batch_size=32) -> (N, 64, 32)         None: modelling only
+    predict_cached(sim, net | None, caches, rows, batch_size=32) -> (N, 64, 32)   streamed from the caches
     synth_scores(sim, net, pairs) -> {"ssim_model", "ssim_enhanced", "mse_model", "mse_enhanced"}
     save_weight_net(path, net, sim, net_kwargs) / load_weight_net(path) -> (net, info)
 """
@@ -107,6 +108,25 @@ def predict(sim: Simulator, net: RadarWeightNet | None, pairs: Pairs, batch_size
     out = [_spectrograms(sim, net, pairs.subset(np.arange(i, min(i + batch_size, len(pairs)))))
            for i in range(0, len(pairs), batch_size)]
     return torch.cat(out)
+
+
+@torch.no_grad()
+def predict_cached(sim: Simulator, net: RadarWeightNet | None, caches: DatasetCaches, rows: np.ndarray,
+                   batch_size: int = 32) -> torch.Tensor:
+    """Simulated spectrograms (N, 64, 32) of cache ``rows``, read batch by batch: the profiles stay
+    float16 as stored (Simulator.combine scales them), so memory holds one batch, not N rows
+    unpacked to complex64 (5 MB each: 14 GB for DHG 14/28's 2800 sequences)."""
+    if net is not None:
+        net.eval()
+    rows = np.asarray(rows, dtype=np.int64)
+    out = []
+    for i in range(0, len(rows), batch_size):
+        sel = rows[i:i + batch_size]
+        packed, scale, active = caches.profiles.load(sel)
+        weights = None if net is None else net(torch.as_tensor(caches.features.features[sel], dtype=torch.float32),
+                                               torch.as_tensor(caches.masks[sel], dtype=torch.bool))
+        out.append(sim.spectrogram(sim.combine(packed, weights, active=active.any(0), scale=scale)))
+    return torch.cat(out) if out else torch.zeros(0, sim.chain.stft_len, sim.chain.n_columns)
 
 
 def synth_scores(sim: Simulator, net: RadarWeightNet, pairs: Pairs) -> dict[str, float]:

@@ -68,7 +68,7 @@ from handradar.synthesis.fit import (
     fit_weight_net,
     load_pairs,
     load_weight_net,
-    predict,
+    predict_cached,
     schedule,
 )
 
@@ -172,8 +172,7 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
     cache_dir = Path(cache_dir)
     if mode == "model":
         caches = cache_rows(real_path, rows, simulator, cache_dir, features=False, n_jobs=n_jobs)
-        pairs = load_pairs(caches, None, np.arange(len(rows)), features=False)
-        spec = predict(simulator, None, pairs).numpy()
+        spec = predict_cached(simulator, None, caches, np.arange(len(rows))).numpy()
     else:
         both = np.union1d(rows, fit_rows)
         caches = cache_rows(real_path, both, simulator, cache_dir, features=True, n_jobs=n_jobs)
@@ -182,7 +181,7 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
         train = load_pairs(caches, targets, np.asarray([local[int(r)] for r in fit_rows]))
         net = fit_weight_net(simulator, train, phases=phases, seed=seed, net_kwargs=net_kwargs)
         del train
-        spec = predict(simulator, net, load_pairs(caches, targets, np.asarray([local[int(r)] for r in rows]))).numpy()
+        spec = predict_cached(simulator, net, caches, np.asarray([local[int(r)] for r in rows])).numpy()
     return _write_rows_like(out, real_path, rows, spec.astype(np.float32), key, simulator, mode)
 
 
@@ -255,8 +254,7 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
                                visibility=feats.visible_fraction() if feats is not None and any(
                                    e.name == "occlusion" for e in simulator.effects) else None)
     caches = DatasetCaches(feats, mask, times, SlotProfileCache(path))
-    pairs = load_pairs(caches, None, np.arange(len(items)), features=net is not None)
-    spec = predict(simulator, net, pairs).numpy().astype(np.float32)
+    spec = predict_cached(simulator, net, caches, np.arange(len(items))).numpy().astype(np.float32)
     classes = source_classes(name, **{k: v for k, v in options.items() if k == "n_classes"})
     h = config_hash(name, root, options, simulator.key(), str(weights), "handradar-synth")
     meta_keys = sorted(set().union(*(it.meta.keys() for it in items)))
