@@ -14,8 +14,8 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    rows, each on its grid (Effect.grid(), or ``grids``) given the others, in one coordinate pass in
    vocabulary order; the fitted values replace the defaults in the baseline before any candidate is
    scored (a baseline noise effect at its default SNR would otherwise leave a gap no candidate closes).
-   The baseline, like every simulator here, averages a noise effect over ``noise_draws`` draws in
-   power: it too is compared through its expected spectrogram;
+   The baseline, like every simulator here, takes a noise effect's expected power (closed form, or
+   the mean of ``noise_draws`` draws): it too is compared through its expected spectrogram;
 2. where: the signed mean residual (measured - simulated) over Doppler and time, SSIM by factor
    (gesture, angle, hands, occlusion, subject), and per reflection point from the per-bone
    decomposition (handradar.gap.where.BoneResiduals); all on the evaluation split;
@@ -129,7 +129,7 @@ class DiagnosisConfig:
     # the baseline's cylinder RCS aspect exponents tried (None or [1.0]: the paper's RCS, uncalibrated)
     bone_extents: list[float] | None = None  # with each exponent (None or [0.0]: one centre per bone, not fitted)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
-    noise_draws: int = 4  # a noise effect's draws averaged in power: compare with its expected spectrogram
+    noise_draws: int = 4  # a noise effect's draws averaged in power (0: its expectation in closed form)
     fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
     refine_steps: int = 0  # gradient steps after the grid for effects with fit == "grad" (0: grid only)
     refine_rows: int = 8  # calibration rows of each gradient step
@@ -161,8 +161,9 @@ class DiagnosisConfig:
                 cfg[name] = [float(e) for e in cfg[name]]
                 if not cfg[name] or not all(0.0 <= e <= 1.0 for e in cfg[name]):
                     raise ValueError(f"diagnose.{name}: values in [0, 1] expected, found {cfg[name]}")
-        if int(cfg.get("noise_draws", 1)) < 1:
-            raise ValueError(f"diagnose.noise_draws must be >= 1, found {cfg['noise_draws']}")
+        if int(cfg.get("noise_draws", 1)) < 0:
+            raise ValueError(f"diagnose.noise_draws must be >= 0 (0: the expectation in closed form), "
+                             f"found {cfg['noise_draws']}")
         if cfg.get("grids") is not None:
             cfg["grids"] = {str(k): {str(p): [float(x) for x in v] for p, v in dict(g).items()}
                             for k, g in dict(cfg["grids"]).items()}
@@ -436,8 +437,8 @@ class _Steps:
         self.names = [n for n in in_vocabulary_order(REGISTRY)
                       if n not in self.base and (cfg.candidates is None or n in cfg.candidates)]
         # every simulator of the diagnosis, the baseline's included, comes from this factory: a noise
-        # effect in the baseline is power-averaged over noise_draws draws like a noise candidate, so
-        # the baseline is compared through its expected spectrogram too (no single speckle pattern)
+        # effect in the baseline takes its expected power like a noise candidate, so the baseline is
+        # compared through its expected spectrogram too (no single speckle pattern)
         self.build = build.replace(noise_draws=cfg.noise_draws)
         self.base_sim = self.build(self.base)
         self.features: BoneFeatures | None = None

@@ -293,6 +293,25 @@ def profile_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     return stft_power(profiles, chain)
 
 
+def white_noise_power(variance: torch.Tensor, chain: ChainConfig, n_chirps: int, n_channels: int,
+                      n_bins: int) -> torch.Tensor:
+    """Expected :func:`profile_power` of white noise, (..., doppler): the same in every column.
+
+    ``variance`` (any shape ...): E|n|^2 of each per-range-bin value, independent across chirps
+    and channels (receiver noise after the range FFT: correlation across bins does not change the
+    summed power). Clutter removal subtracts the mean of ``n_chirps`` values (frames x loops),
+    leaving covariance variance (delta - 1 / n_chirps); a windowed DFT bin d then holds
+    variance (sum w^2 - |W(d)|^2 / n_chirps), W the window's DFT: the mean removal notches the
+    rows near zero Doppler only. Summed over ``n_channels`` channels and ``n_bins`` bins."""
+    w = window(chain.stft_window, chain.stft_len, dtype=torch.float64)
+    per_row = torch.full((chain.stft_len,), float((w**2).sum()), dtype=torch.float64)
+    if chain.clutter_removal:
+        per_row = per_row - torch.fft.fftshift(torch.fft.fft(w).abs() ** 2) / n_chirps
+    variance = torch.as_tensor(variance)
+    return variance[..., None] * (n_channels * n_bins * per_row).to(variance.dtype if variance.is_floating_point()
+                                                                    else torch.float64)
+
+
 def spectrogram_from_profiles(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     """Per-range-bin slow-time signal of one window -> spectrogram in [0, 1] (..., doppler, columns)."""
     return power_to_unit(profile_power(profiles, chain), chain)

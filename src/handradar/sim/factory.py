@@ -67,8 +67,8 @@ class SimFactory:
         unknown = set(settings) - set(SETTINGS)
         if unknown:
             raise ValueError(f"unknown simulator setting(s) {sorted(unknown)}; expected some of {list(SETTINGS)}")
-        if int(noise_draws) < 1:
-            raise ValueError(f"noise_draws must be >= 1, found {noise_draws}")
+        if int(noise_draws) < 0:
+            raise ValueError(f"noise_draws must be >= 0 (0: the expectation in closed form), found {noise_draws}")
         self.radar, self.chain = radar, chain
         self.settings = {k: v for k, v in settings.items() if v is not None}
         self.effects = {str(k): dict(v or {}) for k, v in (effects or {}).items()}

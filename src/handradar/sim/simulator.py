@@ -209,16 +209,22 @@ class Simulator(nn.Module):
         """Summed signal -> signal-stage effects -> the shared chain -> (B, doppler, columns) in [0, 1].
 
         A stochastic signal effect with ``draws`` > 1 (noise) is drawn that many times and the chain's
-        power averaged before dB: the expected spectrogram."""
+        power averaged before dB; with ``draws`` = 0 its expected power is added in closed form
+        (``expected_power``, the limit of many draws): the expected spectrogram either way."""
         stage = self._stage("signal")
-        draws = max([getattr(e, "draws", 1) for e in stage] + [1])
+        drawn = [e for e in stage if getattr(e, "draws", 1) > 0]
+        draws = max([e.draws for e in drawn if hasattr(e, "draws")] + [1])
         power = 0.0
         for _ in range(draws):
             s = signal
-            for e in stage:
+            for e in drawn:
                 s = e.apply_signal(s, self.radar, self.chain)
             power = power + profile_power(s, self.chain)
-        return power_to_unit(power / draws, self.chain)
+        power = power / draws
+        for e in stage:
+            if e not in drawn:  # after the drawn ones (noise, order 80, is the last signal effect)
+                power = power + e.expected_power(s, self.radar, self.chain)
+        return power_to_unit(power, self.chain)
 
     def forward(self, skeleton: torch.Tensor, mask: torch.Tensor, weights: torch.Tensor | None = None, *,
                 times: torch.Tensor | None = None, visibility: torch.Tensor | None = None) -> torch.Tensor:

@@ -9,17 +9,19 @@ it sits far below receiver noise. Draws come from the module's own generator (``
 ``reset_rng()`` replays them. Fitted by grid (the draws make gradients noisy).
 
 ``draws`` > 1 makes the simulator average the power of that many independent draws before dB
-(Simulator.spectrogram): the expected spectrogram, a noise floor at the right level without one
-particular speckle pattern. The gap diagnosis compares with it (a measured speckle pattern is never
-reproduced pixel by pixel, so a single draw costs SSIM even at the right level); synthetic training
-data keep one draw (draws = 1), like a measurement.
+(Simulator.spectrogram); ``draws = 0`` is the limit of many draws in closed form
+(:meth:`Noise.expected_power`: the signal's power plus the chain's expected noise power): the
+expected spectrogram, a noise floor at the right level without one particular speckle pattern. The
+gap diagnosis compares with it (a measured speckle pattern is never reproduced pixel by pixel, so a
+single draw costs SSIM even at the right level); synthetic training data keep one draw
+(draws = 1), like a measurement.
 """
 
 from __future__ import annotations
 
 import torch
 
-from handradar.radar.chain import range_profiles_from_adc, window
+from handradar.radar.chain import range_profiles_from_adc, white_noise_power, window
 from handradar.sim.effects.base import Effect, Param, register
 
 
@@ -34,8 +36,8 @@ class Noise(Effect):
     def __init__(self, seed: int = 0, draws: int = 1, **values: float) -> None:
         super().__init__(**values)
         self.seed = int(seed)
-        if int(draws) < 1:
-            raise ValueError(f"noise: draws must be >= 1, found {draws}")
+        if int(draws) < 0:
+            raise ValueError(f"noise: draws must be >= 0 (0: the expectation in closed form), found {draws}")
         self.draws = int(draws)
         self.reset_rng()
 
@@ -45,15 +47,23 @@ class Noise(Effect):
     def reset_rng(self) -> None:
         self.generator = torch.Generator().manual_seed(self.seed)
 
-    def apply_signal(self, signal, radar, chain):
-        b, f = signal.shape[:2]
-        real = signal.real.dtype
+    def noise_power(self, signal: torch.Tensor) -> torch.Tensor:
+        """(B, 1, 1, 1, 1): the noise power per range bin and chirp, P_signal / 10^(snr_db / 10)."""
         dyn = signal - signal.mean(dim=(-4, -3), keepdim=True)
-        p_sig = (dyn.real**2 + dyn.imag**2).mean(dim=(-4, -3, -2, -1), keepdim=True).detach()  # (B, 1, 1, 1, 1)
+        p_sig = (dyn.real**2 + dyn.imag**2).mean(dim=(-4, -3, -2, -1), keepdim=True).detach()
+        return p_sig / 10.0 ** (self.value("snr_db").to(p_sig.dtype) / 10.0)
+
+    def expected_power(self, signal: torch.Tensor, radar, chain) -> torch.Tensor:
+        """E[profile_power(noise)] (B, doppler, 1), the same in every column; added to the signal's
+        own power it is the expected power of signal + noise exactly (the cross terms have zero mean)."""
+        f, l, ch, bins = signal.shape[-4:]
+        return white_noise_power(self.noise_power(signal).reshape(-1), chain, f * l, ch, bins)[..., None]
+
+    def apply_signal(self, signal, radar, chain):
+        real = signal.real.dtype
         w2 = float((window(chain.range_window, radar.n_samples, dtype=torch.float64) ** 2).sum())
-        p_noise = p_sig / 10.0 ** (self.value("snr_db").to(real) / 10.0)
-        sigma = torch.sqrt(p_noise / w2)
-        shape = (b, f, radar.chirps_per_frame, radar.n_rx, radar.n_samples)
+        sigma = torch.sqrt(self.noise_power(signal) / w2)
+        shape = (signal.shape[0], signal.shape[1], radar.chirps_per_frame, radar.n_rx, radar.n_samples)
         z = torch.complex(torch.randn(shape, generator=self.generator, dtype=real),
                           torch.randn(shape, generator=self.generator, dtype=real)).to(signal.device) / 2**0.5
         noise = range_profiles_from_adc(z, radar, chain)  # (B, F, L, Ch, bins), unit per-sample variance
