@@ -144,6 +144,29 @@ def test_baseline_calibration_recovers_the_bones_extent_jointly_with_the_exponen
     assert "and the bones' extent to 1 of their length" in render(rep, {}, Path("."))
 
 
+def test_baseline_calibration_recovers_a_doppler_spread(radar, short_chain, tmp_path):
+    # "measured" = the paper's simulator with every Doppler line spread by a Gaussian of 2 rows (a generic
+    # broadening: micro-motion, extended scatterers); step 0 finds it on the joint (exponent, spread) grid
+    rs, labels, meta = rows(radar, short_chain, 12, seed=5)
+    with torch.no_grad():
+        measured = Simulator(radar, short_chain, doppler_spread=2.0)(
+            torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks), times=torch.as_tensor(rs.times)).numpy()
+    data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
+    rep = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5], doppler_spreads=[0.0, 1.0, 2.0, 4.0]).report
+    validate_report(rep, n_columns=short_chain.n_columns)
+    cal = rep["baseline"]["calibration"]
+    assert (cal["rcs_exponent"], cal["doppler_spread"]) == (1.0, 2.0) and len(cal["grid"]) == 8
+    assert "bone_extent" not in cal  # only the settings given more than the paper's value are fitted
+    scores = {(g["rcs_exponent"], g["doppler_spread"]): g["ssim"] for g in cal["grid"]}
+    assert scores[1.0, 2.0] == pytest.approx(1.0, abs=1e-4) and max(v for k, v in scores.items() if k != (1.0, 2.0)) < 0.99
+    assert rep["cause"] == "none" and rep["settings"]["doppler_spreads"] == [0.0, 1.0, 2.0, 4.0]
+    assert fitted_simulator(rep)["doppler_spread"] == 2.0
+    text = render(rep, {}, tmp_path)
+    assert "and a Doppler spread of 2 rows" in text and "(exponent, spread)" in text
+    with pytest.raises(ValueError, match="doppler_spreads"):
+        DiagnosisConfig.from_mapping({"doppler_spreads": [-1.0]})
+
+
 def test_step_0_fits_the_baselines_noise_and_compares_its_expected_spectrogram(radar, short_chain, tmp_path):
     # "measured" = one noise draw at 5 dB (like a measurement); the baseline's noise sits at its default 20 dB
     data = gap_data(radar, short_chain, 12, {"noise": {"snr_db": 5.0}}, seed=3)

@@ -308,7 +308,11 @@ def test_white_noise_power_is_the_monte_carlo_mean(radar, short_chain, clutter):
     5 sigma of the sampling error per row, and the notch at zero Doppler only with clutter removal."""
     from dataclasses import replace
 
-    from handradar.radar.chain import profile_power, range_profiles_from_adc, white_noise_power
+    from handradar.radar.chain import (
+        profile_power,
+        range_profiles_from_adc,
+        white_noise_power,
+    )
 
     chain = replace(short_chain, clutter_removal=clutter)
     f = chain.frames_per_window(radar)

@@ -284,3 +284,40 @@ def test_rotating_bone_doppler_lines_at_the_closed_form_rows_of_its_points(radar
     expected = sorted(round(-(0.5 + o) * length * omega * rows_per_mps) + short_chain.stft_len // 2 for o in offsets)
     peaks = [r for r in range(1, len(column) - 1) if column[r] >= max(column[r - 1], column[r + 1]) and column[r] > 0.8]
     assert peaks == expected
+
+
+def test_doppler_spread_adds_its_variance_and_keeps_the_power():
+    """spread_doppler: a Gaussian line of std s0 rows becomes one of std sqrt(s0^2 + sigma^2) (variances
+    add under convolution), centred where it was, with the same total power per column; a line across
+    the wrap-around (row 0) spreads to both ends; sigma = 0 is the identity."""
+    from handradar.sim.simulator import spread_doppler
+
+    n, s0, sigma, centre = 64, 2.0, 3.0, 40.0
+    rows = torch.arange(n, dtype=torch.float64)
+    line = torch.exp(-0.5 * ((rows - centre) / s0) ** 2)[None, :, None].expand(2, n, 5).clone()  # (B, doppler, columns)
+    out = spread_doppler(line, sigma)
+    torch.testing.assert_close(out.sum(-2), line.sum(-2))
+    p = out[0, :, 0] / out[0, :, 0].sum()
+    mean = float((p * rows).sum())
+    var = float((p * (rows - mean) ** 2).sum())
+    assert mean == pytest.approx(centre, abs=1e-6) and var == pytest.approx(s0**2 + sigma**2, rel=1e-3)
+    delta = torch.zeros(1, n, 1, dtype=torch.float64)
+    delta[0, 0, 0] = 1.0
+    wrapped = spread_doppler(delta, 2.0)[0, :, 0]
+    torch.testing.assert_close(wrapped[1:4], wrapped.flip(0)[:3])  # symmetric about row 0 across the wrap
+    assert spread_doppler(line, 0.0) is line
+
+
+def test_simulator_doppler_spread_is_validated_keyed_and_widens_a_moving_hand(radar, short_chain):
+    with pytest.raises(ValueError, match="doppler_spread"):
+        Simulator(radar, short_chain, doppler_spread=-1.0)
+    assert "doppler_spread" not in Simulator(radar, short_chain).key()
+    assert Simulator(radar, short_chain, doppler_spread=1.5).key()["doppler_spread"] == 1.5
+    t = np.arange(int(round(short_chain.frames_per_window(radar) * radar.frame_period_s * 100))) / 100
+    pos, mask = window(t, hands=1, seed=3)
+    sk, mk = torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
+
+    def occupied_rows(spread: float) -> float:  # rows above half the [0, 1] scale, mean over columns
+        return float((Simulator(radar, short_chain, doppler_spread=spread)(sk, mk)[0] > 0.5).sum(0).float().mean())
+
+    assert occupied_rows(3.0) > occupied_rows(0.0)

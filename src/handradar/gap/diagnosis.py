@@ -5,8 +5,9 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
 1. split the rows, seeded and stratified by gesture, into a calibration and an evaluation split;
    calibrate the baseline: the aspect exponent of its cylinder RCS (handradar.sim.rcs; 1 = the
    paper's formula) that fits the calibration split best (``rcs_exponents``), jointly with the
-   bones' extent along their length (``bone_extents``; handradar.sim.scatterers; [0.0], the default:
-   the paper's one centre per bone, not fitted). This generic
+   bones' extent along their length (``bone_extents``; handradar.sim.scatterers) and a Gaussian spread
+   of the power along Doppler (``doppler_spreads``; Simulator.spread_doppler), each off by default
+   (the paper's one centre per bone, no spread; gap.fit.GENERIC_SETTINGS). This generic
    calibration comes first so that candidates are scored on the gap it leaves: without it, any
    candidate that adds slow, broad returns (a palm disc, radar-table image paths) closes part of the generic
    "the cylinders are too specular" gap in every data set and wins where its effect is absent.
@@ -84,10 +85,12 @@ from handradar.data.splits import stratified_partition
 from handradar.gap.data import GapData
 from handradar.gap.engine import Variant, VariantEngine, merge
 from handradar.gap.fit import (
+    GENERIC_SETTINGS,
     GridFit,
     calibrate_settings,
     effect_grid,
     fit_baseline_effects,
+    generic_grid,
     grid_fit,
     in_vocabulary_order,
     refine,
@@ -128,6 +131,7 @@ class DiagnosisConfig:
     rcs_exponents: list[float] | None = field(default_factory=lambda: [1.0, 0.75, 0.5, 0.25, 0.1, 0.0])
     # the baseline's cylinder RCS aspect exponents tried (None or [1.0]: the paper's RCS, uncalibrated)
     bone_extents: list[float] | None = None  # with each exponent (None or [0.0]: one centre per bone, not fitted)
+    doppler_spreads: list[float] | None = None  # ... and each Doppler spread, rows (None or [0.0]: none, not fitted)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
     noise_draws: int = 4  # a noise effect's draws averaged in power (0: its expectation in closed form)
     fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
@@ -156,11 +160,11 @@ class DiagnosisConfig:
                              f"{sorted(cls.__dataclass_fields__)}")
         if cfg.get("candidates") is not None:
             cfg["candidates"] = [str(c) for c in cfg["candidates"]]
-        for name in ("rcs_exponents", "bone_extents"):
+        for name, top in (("rcs_exponents", 1.0), ("bone_extents", 1.0), ("doppler_spreads", 16.0)):
             if cfg.get(name) is not None:
                 cfg[name] = [float(e) for e in cfg[name]]
-                if not cfg[name] or not all(0.0 <= e <= 1.0 for e in cfg[name]):
-                    raise ValueError(f"diagnose.{name}: values in [0, 1] expected, found {cfg[name]}")
+                if not cfg[name] or not all(0.0 <= e <= top for e in cfg[name]):
+                    raise ValueError(f"diagnose.{name}: values in [0, {top:g}] expected, found {cfg[name]}")
         if int(cfg.get("noise_draws", 1)) < 0:
             raise ValueError(f"diagnose.noise_draws must be >= 0 (0: the expectation in closed form), "
                              f"found {cfg['noise_draws']}")
@@ -513,8 +517,8 @@ class _Steps:
                         "(use 30 or more)", len(self.ev))
 
     def calibrate_fold(self, fold: Fold) -> None:
-        """Step 0 on one fold's fitting rows: the generic settings (RCS exponent, bone extent), then the
-        baseline's own effects given them."""
+        """Step 0 on one fold's fitting rows: the generic settings (RCS exponent, bone extent, Doppler
+        spread), then the baseline's own effects given them."""
         cfg, d = self.cfg, self.data
         build, calibration = self.build, {"rcs_exponent": 1.0, "grid": []}
         if len(self.generic_grid) > 1 or self.generic_grid[0] != {"rcs_exponent": 1.0}:
@@ -537,18 +541,14 @@ class _Steps:
         baseline. The reported baseline is the last fold's (the parameter fit)."""
         if "occlusion" in self.base:  # the baseline simulated below then needs visibility
             self.bone_features(self.base_sim)
-        # step 0's grid: every exponent with every extent; the extent is left out of the points (and of
-        # the report) while only the paper's 0 is tried
-        extents = list(self.cfg.bone_extents or [0.0])
-        self.generic_grid = [{"rcs_exponent": e, **({"bone_extent": x} if extents != [0.0] else {})}
-                             for e in (self.cfg.rcs_exponents or [1.0]) for x in extents]
+        self.generic_grid = generic_grid({name: getattr(self.cfg, name) for name in GENERIC_SETTINGS})
         for fold in self.folds:
             self.calibrate_fold(fold)
         reported = self.folds[-1]
         self.build, self.base, self.calibration = reported.build, reported.base, dict(reported.calibration)
         if len(self.folds) > 1:
-            self.calibration["folds"] = [{k: f.calibration[k] for k in ("rcs_exponent", "bone_extent", "effects")
-                                          if k in f.calibration} for f in self.scored]
+            keys = [setting for setting, _ in GENERIC_SETTINGS.values()] + ["effects"]
+            self.calibration["folds"] = [{k: f.calibration[k] for k in keys if k in f.calibration} for f in self.scored]
         self.base_sim = self.build(self.base)
 
     def cache(self) -> None:
@@ -653,7 +653,8 @@ class _Steps:
                        "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
                                     "folds": cfg.folds, "fit_rows": int(len(self.folds[-1].fit_idx)),
                                     "refine_steps": cfg.refine_steps, "rcs_exponents": list(cfg.rcs_exponents or [1.0]),
-                                    **({"bone_extents": cfg.bone_extents} if cfg.bone_extents not in (None, [0.0]) else {}),
+                                    **{name: getattr(cfg, name) for name in ("bone_extents", "doppler_spreads")
+                                       if getattr(cfg, name) not in (None, [0.0])},
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
                                     "min_gap_closed": cfg.min_gap_closed}}
 

@@ -21,6 +21,7 @@ their grids, then optional gradient steps.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -71,6 +72,25 @@ def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:
     if not np.all(np.isfinite(spec)):
         return float("-inf")
     return float(per_example_ssim(target, torch.as_tensor(spec)).mean())
+
+
+# Step 0's generic simulator settings: the diagnosis's list of values to try -> (the simulator
+# setting, its value in the paper's model). A setting whose list is only that value is not fitted.
+GENERIC_SETTINGS: dict[str, tuple[str, float]] = {"rcs_exponents": ("rcs_exponent", 1.0),
+                                                  "bone_extents": ("bone_extent", 0.0),
+                                                  "doppler_spreads": ("doppler_spread", 0.0)}
+
+
+def generic_grid(values: Mapping[str, Sequence[float] | None]) -> list[dict[str, float]]:
+    """Step 0's grid: every combination of the generic settings' values (``values``: the diagnosis's
+    lists by GENERIC_SETTINGS name, None: the paper's value). The RCS exponent is in every point;
+    another setting only when more than the paper's value is tried."""
+    axes = []
+    for name, (setting, paper) in GENERIC_SETTINGS.items():
+        vals = [float(v) for v in (values.get(name) or [paper])]
+        if setting == "rcs_exponent" or vals != [paper]:
+            axes.append([(setting, v) for v in vals])
+    return [dict(point) for point in itertools.product(*axes)]
 
 
 def calibrate_settings(build: SimFactory, base: Mapping, rows: RowSet, idx: np.ndarray, measured: np.ndarray,

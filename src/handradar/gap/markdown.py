@@ -11,21 +11,29 @@ def _params(p: dict) -> str:
     return ", ".join(f"{k}={v:.4g}" for k, v in p.items()) or "-"
 
 
+# step 0's generic settings beside the exponent: (grid axis name, the fitted value as a clause)
+_GENERIC_TEXT = {"bone_extent": ("extent", "the bones' extent to {:g} of their length"),
+                 "doppler_spread": ("spread", "a Doppler spread of {:g} rows")}
+
+
 def _calibration(cal: dict | None) -> str:
-    """Step 0 (the RCS exponent, the bones' extent if fitted, the baseline's own effects), as a clause of the baseline line."""
+    """Step 0 (the RCS exponent, the bones' extent and Doppler spread if fitted, the baseline's own effects),
+    as a clause of the baseline line."""
     cal = cal or {}
     if not cal.get("grid"):
         text = " (the paper's cylinder RCS, not calibrated)"
     else:
-        joint = "bone_extent" in cal  # a joint grid: (exponent, extent) per point
+        extra = [k for k in _GENERIC_TEXT if k in cal]  # fitted beside the exponent: a tuple per grid point
+        keys = ["rcs_exponent", *extra]
 
         def point(g: dict) -> str:
-            return f"({g['rcs_exponent']:g}, {g['bone_extent']:g})" if joint else f"{g['rcs_exponent']:g}"
+            return f"({', '.join(f'{g[k]:g}' for k in keys)})" if extra else f"{g['rcs_exponent']:g}"
 
         tried = ", ".join(f"{point(g)}: {fmt_number(g['ssim'])}" for g in cal["grid"])
-        extent = f" and the bones' extent to {cal['bone_extent']:g} of their length" if joint else ""
-        axes, paper = ("(exponent, extent)", "(1, 0) = the paper's model") if joint else ("exponent", "1 = the paper's RCS")
-        text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g}{extent} on the "
+        fitted = "".join(f" and {_GENERIC_TEXT[k][1].format(cal[k])}" for k in extra)
+        axes = f"({', '.join(['exponent'] + [_GENERIC_TEXT[k][0] for k in extra])})" if extra else "exponent"
+        paper = f"({', '.join(['1'] + ['0'] * len(extra))}) = the paper's model" if extra else "1 = the paper's RCS"
+        text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g}{fitted} on the "
                 f"calibration rows (mean SSIM there by {axes}: {tried}; {paper})")
     if cal.get("effects"):
         text += ("; the baseline's own effects fitted there on their grids: "

@@ -114,7 +114,7 @@ def write_report(path: str | Path, report: dict, *, n_doppler: int = 64, n_colum
 
 def fitted_simulator(report: dict, sim_settings: Mapping | None = None) -> dict:
     """The simulator a diagnosis fitted, as ``sim`` settings (conf/sim/fitted.yaml reads them back):
-    the baseline's settings with step 0's calibrated RCS exponent (and bone extent), and the baseline's effects plus
+    the baseline's settings with step 0's calibrated RCS exponent (and bone extent, Doppler spread), and the baseline's effects plus
     those the greedy selection kept, each with its fitted parameters."""
     base = dict(report["baseline"].get("effects") or {})
     after = report["after"]
@@ -123,7 +123,7 @@ def fitted_simulator(report: dict, sim_settings: Mapping | None = None) -> dict:
     settings = {k: v for k, v in dict(sim_settings or {}).items()
                 if not str(k).startswith("_") and k not in ("effects", "effect_params", "from_report")}
     calibration = report["baseline"].get("calibration") or {}
-    for name in ("rcs_exponent", "bone_extent"):  # step 0's generic settings
+    for name in ("rcs_exponent", "bone_extent", "doppler_spread"):  # step 0's generic settings (gap.fit.GENERIC_SETTINGS)
         if name in calibration:
             settings[name] = float(calibration[name])
     return {**settings, "effects": effects, "effect_params": {k: params.get(k, {}) for k in effects}}
