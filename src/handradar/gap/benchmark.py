@@ -196,7 +196,10 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "baseline_ssim": report["baseline"]["ssim"], "after_effects": report["after"]["effects"],
             "after_gap_closed": report["after"]["gap_closed"], "lead_ci95": report["evidence"].get("lead_ci95"),
             "recordings_needed": report["evidence"].get("recordings_needed"),
-            "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds}
+            "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
+            # step 0's generic settings and the mean SSIM of each grid point (not the effects' grids)
+            "calibration": {k: v for k, v in (report["baseline"].get("calibration") or {}).items()
+                            if k not in ("effects", "effect_grids")}}
 
 
 def split_text(diag_cfg: Mapping) -> str:
