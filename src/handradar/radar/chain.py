@@ -308,8 +308,9 @@ def white_noise_power(variance: torch.Tensor, chain: ChainConfig, n_chirps: int,
     if chain.clutter_removal:
         per_row = per_row - torch.fft.fftshift(torch.fft.fft(w).abs() ** 2) / n_chirps
     variance = torch.as_tensor(variance)
-    return variance[..., None] * (n_channels * n_bins * per_row).to(variance.dtype if variance.is_floating_point()
-                                                                    else torch.float64)
+    if not variance.is_floating_point():
+        variance = variance.to(torch.float64)
+    return variance[..., None] * (n_channels * n_bins * per_row).to(variance.dtype)
 
 
 def spectrogram_from_profiles(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:

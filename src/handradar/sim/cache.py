@@ -5,8 +5,8 @@ so they are computed once and stored: float16 real/imag pairs scaled by a per-ro
 (the row's largest |real| or |imag|), i.e. ~5e-4 relative precision, far inside the chain's 30 dB
 floor. 39 x 2048 chirps x 8 bins x 2 x 2 bytes = 2.6 MB per example (default radar); each slot of
 a row is one uncompressed HDF5 chunk, written only when non-zero, so the 19 slots of an untracked
-hand cost nothing on disk. ``active`` (N, 38) records the non-zero bone slots, so that a batch of one-hand examples
-skips the other hand (Simulator.combine(..., active=...)).
+hand cost nothing on disk. ``active`` (N, 38) records the non-zero bone slots, so that a batch of
+one-hand examples skips the other hand (Simulator.combine(..., active=...)).
 
 The file is named by :func:`handradar.provenance.config_hash` of the radar, the chain, the
 simulator's settings and effects (with their values), and a digest of the input arrays; it is
