@@ -97,7 +97,7 @@ from handradar.gap.fit import (
 )
 from handradar.gap.report import FACTORS, FORMAT
 from handradar.gap.rwn import rwn_readout
-from handradar.gap.specificity import row_factors, specificity
+from handradar.gap.specificity import pixel_specificity, row_factors, specificity
 from handradar.gap.where import (
     BoneResiduals,
     by_factor,
@@ -661,10 +661,12 @@ class _Steps:
     def candidate_entries(self) -> list[dict]:
         """The report's candidates, each with its specificity evidence where its physics names a factor."""
         factors = row_factors(self.data.rows.take(self.ev))
+        measured, boot = self.data.measured[self.ev], {"n_boot": self.cfg.n_boot, "seed": self.cfg.seed}
         out = []
         for c in self.cands:
             e = c.entry(self.cfg.min_gap_closed)
-            sp = specificity(c.effect, c.ssim - self.before_ssim, factors, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
+            sp = (specificity(c.effect, c.ssim - self.before_ssim, factors, **boot)
+                  or pixel_specificity(c.effect, measured, self.base_spec, c.spectrograms, **boot))
             if sp is not None:
                 e["specificity"] = sp
             out.append(e)

@@ -116,7 +116,9 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
                      f"{'yes' if c.get('significant') else 'no'} | {fmt_number(c.get('signature_correlation'), 2, True)} | {spec} |")
     lines += ["", "The last column is specificity evidence (handradar.gap.specificity; not part of the rule): "
                   "an effect's mean per-row gain where the factor its physics acts through is high minus where it "
-                  "is low, factors from the skeletons. Near 0, the candidate closes a generic gap.", ""]
+                  "is low, factors from the skeletons (noise: within each row, the squared-residual reduction far "
+                  "from every simulated return minus next to them). Near 0 or below, the candidate closes a generic "
+                  "gap.", ""]
     if ev:
         lines += [f"Rule: {ev.get('rule', '')}.", ""]
         if ev.get("leader"):

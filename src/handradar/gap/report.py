@@ -26,6 +26,12 @@ def _number(obj: dict, key: str, where: str) -> float:
     return float(v)
 
 
+def _interval(obj: dict, where: str) -> None:
+    ci = obj.get("ci95")
+    if not isinstance(ci, list) or len(ci) != 2 or not ci[0] <= ci[1]:
+        raise ReportError(f"{where}.ci95 must be [low, high] with low <= high, found {ci!r}")
+
+
 def _scores(obj: object, where: str) -> None:
     if not isinstance(obj, dict):
         raise ReportError(f"{where} must be an object")
@@ -71,17 +77,13 @@ def validate_report(report: dict, *, n_doppler: int = 64, n_columns: int = 32) -
             raise ReportError(f"{w} needs 'effect' (string) and 'params' (object)")
         _scores(c, w)
         _number(c, "gap_closed", w)
-        ci = c.get("ci95")
-        if not isinstance(ci, list) or len(ci) != 2 or not ci[0] <= ci[1]:
-            raise ReportError(f"{w}.ci95 must be [low, high] with low <= high, found {ci!r}")
+        _interval(c, w)
         sp = c.get("specificity")
         if sp is not None:  # optional evidence (handradar.gap.specificity)
             if not isinstance(sp, dict) or not isinstance(sp.get("factor"), str):
                 raise ReportError(f"{w}.specificity must be an object with a 'factor' (string)")
             _number(sp, "contrast", f"{w}.specificity")
-            sci = sp.get("ci95")
-            if not isinstance(sci, list) or len(sci) != 2 or not sci[0] <= sci[1]:
-                raise ReportError(f"{w}.specificity.ci95 must be [low, high] with low <= high, found {sci!r}")
+            _interval(sp, f"{w}.specificity")
         names.append(c["effect"])
     if len(set(names)) != len(names):
         raise ReportError(f"candidates must name each effect once, found {names}")

@@ -6,6 +6,12 @@ sync offset where the hand moves fast in range, a palm return where the palm fac
 candidate whose gain is uniform across such a factor closes a generic gap instead (a floor, a
 smoothing): a sign that its credit is not its own.
 
+White receiver noise acts through no row factor but through pixels: it adds the same expected power
+at every Doppler and time, so it alone can fill the pixels far from every simulated return (at the
+baseline's floor, more than FAR_ROWS Doppler rows from any pixel above it); a closer of a generic gap
+(a Doppler spread, a broad slow return) acts next to the simulated returns instead, and only makes
+the far pixels worse. Its evidence is a within-row contrast over pixels (:func:`floor_contrast`).
+
 Every factor is computed from the rows' skeleton windows (and the visibility the occlusion
 candidate needs), never from meta.json, so that recordings from any source have them:
 
@@ -15,6 +21,12 @@ candidate needs), never from meta.json, so that recordings from any source have 
     interaction(gain, high, n_boot, seed) -> dict   mean gain where the factor is high minus where it is low,
                                                     with a bootstrap 95 % CI (rows resampled within each group)
     specificity(effect, gain, factors, n_boot, seed) -> dict | None   (report key ``specificity`` of a candidate)
+    PIXEL_FACTOR: {effect: factor}                  noise: far_from_returns
+    far_pixels(before) -> (N, doppler, columns) bool   at the floor, > FAR_ROWS rows from any simulated return
+    floor_contrast(measured, before, after, n_boot, seed) -> dict | None   per row, the mean squared-residual
+                                                    reduction over the far pixels minus over the others; its
+                                                    mean over rows with a bootstrap 95 % CI
+    pixel_specificity(effect, measured, before, after, n_boot, seed) -> dict | None   (the same report key)
 
 Reported as evidence next to gap_closed; it does not enter ``cause``.
 """
@@ -24,6 +36,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+import scipy.ndimage
 
 from handradar.gap.engine import RowSet
 
@@ -37,7 +50,12 @@ EXPECTED_FACTOR: dict[str, str] = {
     "sync_offset": "radial_speed_m_s",  # a time shift moves Doppler where the range rate is high
     "palm": "palm_facing",  # the palm plate returns most when it faces the radar
 }
+PIXEL_FACTOR: dict[str, str] = {
+    "noise": "far_from_returns",  # white noise alone fills the pixels far from every simulated return
+}
 MIN_GROUP = 3  # rows per group below which no interaction is reported
+FLOOR = 1e-6  # a baseline pixel at or below this ([0, 1] spectrogram) is at the chain's floor
+FAR_ROWS = 4  # Doppler rows from a simulated return beyond which only noise acts: twice the Hamming mainlobe's half-width
 
 
 def _masked_mean(values: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -99,4 +117,52 @@ def specificity(effect: str, gain: np.ndarray, factors: Mapping[str, np.ndarray]
         return None
     return {"factor": factor, "split": "two hands vs one" if factor == "two_hands" else
             f"above vs at or below the median {float(np.median(values)):.4g}",
+            **out, "specific": bool(out["ci95"][0] > 0.0)}
+
+
+def far_pixels(before: np.ndarray) -> np.ndarray:
+    """(N, doppler, columns) bool: pixels of the baseline spectrograms ``before`` more than FAR_ROWS Doppler
+    rows (circularly) from every pixel above the floor in their column."""
+    above = np.asarray(before) > FLOOR
+    near = scipy.ndimage.maximum_filter1d(above.astype(np.uint8), size=2 * FAR_ROWS + 1, axis=1, mode="wrap")
+    return near == 0
+
+
+def floor_contrast(measured: np.ndarray, before: np.ndarray, after: np.ndarray, *, n_boot: int = 2000,
+                   seed: int = 0) -> dict | None:
+    """Where a candidate's credit lies in the pixels: per row, the mean reduction of the squared residual
+    (measured - simulated, [0, 1] spectrograms (N, doppler, columns)) from ``before`` (baseline) to ``after``
+    (candidate) over the pixels far from every simulated return (:func:`far_pixels`), minus over the other
+    pixels; the mean over rows with a bootstrap 95 % CI (rows resampled). None when fewer than MIN_GROUP
+    rows have both kinds."""
+    m, b, a = (np.asarray(x, dtype=np.float64) for x in (measured, before, after))
+    gain = ((m - b) ** 2 - (m - a) ** 2).reshape(len(m), -1)
+    floor = far_pixels(b).reshape(len(m), -1)
+    n_floor = floor.sum(axis=1)
+    both = (n_floor > 0) & (n_floor < floor.shape[1])
+    if both.sum() < MIN_GROUP:
+        return None
+    g, f, nf = gain[both], floor[both], n_floor[both]
+    high = (g * f).sum(axis=1) / nf
+    low = (g * ~f).sum(axis=1) / (f.shape[1] - nf)
+    diff = high - low
+    rng = np.random.default_rng(seed)
+    boots = diff[rng.integers(0, len(diff), (n_boot, len(diff)))].mean(axis=1)
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    return {"gain_high": float(high.mean()), "gain_low": float(low.mean()), "contrast": float(diff.mean()),
+            "ci95": [float(lo), float(hi)], "n_rows": int(both.sum()), "far_share": float(nf.mean() / f.shape[1])}
+
+
+def pixel_specificity(effect: str, measured: np.ndarray, before: np.ndarray, after: np.ndarray, *,
+                      n_boot: int = 2000, seed: int = 0) -> dict | None:
+    """:func:`floor_contrast` for an effect whose physics acts through pixels (PIXEL_FACTOR), in the form of
+    :func:`specificity`'s result; None for other effects or where no row has both kinds of pixel."""
+    if effect not in PIXEL_FACTOR:
+        return None
+    out = floor_contrast(measured, before, after, n_boot=n_boot, seed=seed)
+    if out is None:
+        return None
+    return {"factor": PIXEL_FACTOR[effect], "split": f"within each row, the pixels more than {FAR_ROWS} Doppler rows "
+                                                     "from every simulated return vs the others (squared-residual "
+                                                     "reduction)",
             **out, "specific": bool(out["ci95"][0] > 0.0)}
