@@ -15,8 +15,8 @@ from handradar.gap.report import ReportError, validate_report
 from handradar.gap.specificity import (
     EXPECTED_FACTOR,
     FAR_ROWS,
+    far_contrast,
     far_pixels,
-    floor_contrast,
     interaction,
     pixel_specificity,
     row_factors,
@@ -94,7 +94,7 @@ def test_far_pixels_are_more_than_far_rows_from_every_return_circularly():
     assert far[1 + FAR_ROWS + 1:64 - FAR_ROWS + 1, 1].all() and far[:, 2].all()  # a column with no return
 
 
-def test_floor_contrast_credits_a_white_floor_and_not_a_spread():
+def test_far_contrast_credits_a_white_floor_and_not_a_spread():
     """Measured = returns + a white floor; a candidate that adds the floor everywhere gains most far from
     the returns, one that spreads the returns (a generic closer) gains only next to them."""
     rng = np.random.default_rng(1)
@@ -105,13 +105,13 @@ def test_floor_contrast_credits_a_white_floor_and_not_a_spread():
     measured = np.maximum(before, floor)
     white = np.maximum(before, 0.2)
     spread = np.where(np.abs(rows - centre) <= 4, white, before)  # the floor next to the returns only
-    w = floor_contrast(measured, before, white, n_boot=500)
+    w = far_contrast(measured, before, white, n_boot=500)
     assert w["contrast"] > 0 and w["ci95"][0] > 0 and w["gain_high"] > 0.03
-    s_ = floor_contrast(measured, before, spread, n_boot=500)
+    s_ = far_contrast(measured, before, spread, n_boot=500)
     assert s_["ci95"][1] < 0 and s_["gain_high"] == 0.0  # nothing changes far from the returns
     assert pixel_specificity("noise", measured, before, white, n_boot=500)["specific"]
     assert pixel_specificity("palm", measured, before, white) is None
-    assert floor_contrast(measured[:2], before[:2], white[:2]) is None  # too few rows to say anything
+    assert far_contrast(measured[:2], before[:2], white[:2]) is None  # too few rows to say anything
 
 
 def test_a_noise_candidate_named_for_a_gap_it_did_not_make_is_not_specific(radar, short_chain):

@@ -10,7 +10,7 @@ White receiver noise acts through no row factor but through pixels: it adds the 
 at every Doppler and time, so it alone can fill the pixels far from every simulated return (at the
 baseline's floor, more than FAR_ROWS Doppler rows from any pixel above it); a closer of a generic gap
 (a Doppler spread, a broad slow return) acts next to the simulated returns instead, and only makes
-the far pixels worse. Its evidence is a within-row contrast over pixels (:func:`floor_contrast`).
+the far pixels worse. Its evidence is a within-row contrast over pixels (:func:`far_contrast`).
 
 Every factor is computed from the rows' skeleton windows (and the visibility the occlusion
 candidate needs), never from meta.json, so that recordings from any source have them:
@@ -23,7 +23,7 @@ candidate needs), never from meta.json, so that recordings from any source have 
     specificity(effect, gain, factors, n_boot, seed) -> dict | None   (report key ``specificity`` of a candidate)
     PIXEL_FACTOR: {effect: factor}                  noise: far_from_returns
     far_pixels(before) -> (N, doppler, columns) bool   at the floor, > FAR_ROWS rows from any simulated return
-    floor_contrast(measured, before, after, n_boot, seed) -> dict | None   per row, the mean squared-residual
+    far_contrast(measured, before, after, n_boot, seed) -> dict | None   per row, the mean squared-residual
                                                     reduction over the far pixels minus over the others; its
                                                     mean over rows with a bootstrap 95 % CI
     pixel_specificity(effect, measured, before, after, n_boot, seed) -> dict | None   (the same report key)
@@ -128,7 +128,7 @@ def far_pixels(before: np.ndarray) -> np.ndarray:
     return near == 0
 
 
-def floor_contrast(measured: np.ndarray, before: np.ndarray, after: np.ndarray, *, n_boot: int = 2000,
+def far_contrast(measured: np.ndarray, before: np.ndarray, after: np.ndarray, *, n_boot: int = 2000,
                    seed: int = 0) -> dict | None:
     """Where a candidate's credit lies in the pixels: per row, the mean reduction of the squared residual
     (measured - simulated, [0, 1] spectrograms (N, doppler, columns)) from ``before`` (baseline) to ``after``
@@ -137,12 +137,12 @@ def floor_contrast(measured: np.ndarray, before: np.ndarray, after: np.ndarray, 
     rows have both kinds."""
     m, b, a = (np.asarray(x, dtype=np.float64) for x in (measured, before, after))
     gain = ((m - b) ** 2 - (m - a) ** 2).reshape(len(m), -1)
-    floor = far_pixels(b).reshape(len(m), -1)
-    n_floor = floor.sum(axis=1)
-    both = (n_floor > 0) & (n_floor < floor.shape[1])
+    far = far_pixels(b).reshape(len(m), -1)
+    n_far = far.sum(axis=1)
+    both = (n_far > 0) & (n_far < far.shape[1])
     if both.sum() < MIN_GROUP:
         return None
-    g, f, nf = gain[both], floor[both], n_floor[both]
+    g, f, nf = gain[both], far[both], n_far[both]
     high = (g * f).sum(axis=1) / nf
     low = (g * ~f).sum(axis=1) / (f.shape[1] - nf)
     diff = high - low
@@ -155,11 +155,11 @@ def floor_contrast(measured: np.ndarray, before: np.ndarray, after: np.ndarray, 
 
 def pixel_specificity(effect: str, measured: np.ndarray, before: np.ndarray, after: np.ndarray, *,
                       n_boot: int = 2000, seed: int = 0) -> dict | None:
-    """:func:`floor_contrast` for an effect whose physics acts through pixels (PIXEL_FACTOR), in the form of
+    """:func:`far_contrast` for an effect whose physics acts through pixels (PIXEL_FACTOR), in the form of
     :func:`specificity`'s result; None for other effects or where no row has both kinds of pixel."""
     if effect not in PIXEL_FACTOR:
         return None
-    out = floor_contrast(measured, before, after, n_boot=n_boot, seed=seed)
+    out = far_contrast(measured, before, after, n_boot=n_boot, seed=seed)
     if out is None:
         return None
     return {"factor": PIXEL_FACTOR[effect], "split": f"within each row, the pixels more than {FAR_ROWS} Doppler rows "
