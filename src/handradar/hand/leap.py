@@ -11,11 +11,13 @@ Frames without hands are kept as untracked steps (mask False); nothing is invent
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import itertools
 import json
 import math
 import operator
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -219,6 +221,21 @@ def _loads(raw: bytes, line: str) -> object:
         return json.loads(line)
 
 
+@contextlib.contextmanager
+def _gc_paused() -> Iterator[None]:
+    """The cyclic garbage collector paused: parsed JSON holds no reference cycles (reference counting
+    frees it), while the raw joint values kept until their batch is converted would make every
+    collection pass walk them again: measured, 8.9-12.2 ms against 6.1-6.4 ms for a 261-frame file, as
+    collections come with what else the process holds (in bench_ingest they are rare: no change)."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_start_us: float) -> HandSequence:
     """Read ``leap.jsonl`` into a radar-frame HandSequence; time 0 is the start of radar frame 0."""
     path = Path(path)
@@ -232,7 +249,7 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
         fh = path.open("rb")  # bytes: a decoding error is then reported with its line number
     except OSError as exc:
         raise FormatError(path, f"cannot read: {exc.strerror}") from None
-    with fh:
+    with fh, _gc_paused():
         try:
             for lineno, raw in enumerate(fh, start=1):
                 try:
