@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -78,7 +79,7 @@ def write_recordings(root: Path, n: int = N_RECORDINGS, n_frames: int = N_FRAMES
     return radar
 
 
-def _parse_each(parse, lines: list[bytes]) -> None:
+def _parse_each(parse: Callable[[bytes], object], lines: list[bytes]) -> None:
     """Parse every line and drop the result at once, as read_leap_jsonl does: keeping thousands of
     parsed frames alive makes the garbage collector's passes, not the parser, the cost."""
     for line in lines:

@@ -112,12 +112,13 @@ def specificity(effect: str, gain: np.ndarray, factors: Mapping[str, np.ndarray]
         return None
     values = np.asarray(factors[factor], dtype=np.float64)
     high = values > 0.5 if factor == "two_hands" else values > np.median(values)
-    out = interaction(gain, high, n_boot=n_boot, seed=seed)
-    if out is None:
-        return None
-    return {"factor": factor, "split": "two hands vs one" if factor == "two_hands" else
-            f"above vs at or below the median {float(np.median(values)):.4g}",
-            **out, "specific": bool(out["ci95"][0] > 0.0)}
+    split = "two hands vs one" if factor == "two_hands" else f"above vs at or below the median {float(np.median(values)):.4g}"
+    return _evidence(factor, split, interaction(gain, high, n_boot=n_boot, seed=seed))
+
+
+def _evidence(factor: str, split: str, out: dict | None) -> dict | None:
+    """A contrast as report key ``specificity``: specific when its 95 % CI lies above 0."""
+    return None if out is None else {"factor": factor, "split": split, **out, "specific": bool(out["ci95"][0] > 0.0)}
 
 
 def far_pixels(before: np.ndarray) -> np.ndarray:
@@ -129,7 +130,7 @@ def far_pixels(before: np.ndarray) -> np.ndarray:
 
 
 def far_contrast(measured: np.ndarray, before: np.ndarray, after: np.ndarray, *, n_boot: int = 2000,
-                   seed: int = 0) -> dict | None:
+                 seed: int = 0) -> dict | None:
     """Where a candidate's credit lies in the pixels: per row, the mean reduction of the squared residual
     (measured - simulated, [0, 1] spectrograms (N, doppler, columns)) from ``before`` (baseline) to ``after``
     (candidate) over the pixels far from every simulated return (:func:`far_pixels`), minus over the other
@@ -143,13 +144,13 @@ def far_contrast(measured: np.ndarray, before: np.ndarray, after: np.ndarray, *,
     if both.sum() < MIN_GROUP:
         return None
     g, f, nf = gain[both], far[both], n_far[both]
-    high = (g * f).sum(axis=1) / nf
-    low = (g * ~f).sum(axis=1) / (f.shape[1] - nf)
-    diff = high - low
+    far_gain = (g * f).sum(axis=1) / nf
+    near_gain = (g * ~f).sum(axis=1) / (f.shape[1] - nf)
+    diff = far_gain - near_gain
     rng = np.random.default_rng(seed)
     boots = diff[rng.integers(0, len(diff), (n_boot, len(diff)))].mean(axis=1)
     lo, hi = np.percentile(boots, [2.5, 97.5])
-    return {"gain_high": float(high.mean()), "gain_low": float(low.mean()), "contrast": float(diff.mean()),
+    return {"gain_high": float(far_gain.mean()), "gain_low": float(near_gain.mean()), "contrast": float(diff.mean()),
             "ci95": [float(lo), float(hi)], "n_rows": int(both.sum()), "far_share": float(nf.mean() / f.shape[1])}
 
 
@@ -159,10 +160,6 @@ def pixel_specificity(effect: str, measured: np.ndarray, before: np.ndarray, aft
     :func:`specificity`'s result; None for other effects or where no row has both kinds of pixel."""
     if effect not in PIXEL_FACTOR:
         return None
-    out = far_contrast(measured, before, after, n_boot=n_boot, seed=seed)
-    if out is None:
-        return None
-    return {"factor": PIXEL_FACTOR[effect], "split": f"within each row, the pixels more than {FAR_ROWS} Doppler rows "
-                                                     "from every simulated return vs the others (squared-residual "
-                                                     "reduction)",
-            **out, "specific": bool(out["ci95"][0] > 0.0)}
+    split = (f"within each row, the pixels more than {FAR_ROWS} Doppler rows from every simulated return vs the "
+             "others (squared-residual reduction)")
+    return _evidence(PIXEL_FACTOR[effect], split, far_contrast(measured, before, after, n_boot=n_boot, seed=seed))
