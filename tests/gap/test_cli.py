@@ -58,7 +58,16 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     w = s.benchmark.world
     assert len(w.gestures) * w.subjects * len(s.world.angles_deg) * w.repetitions == 36
     assert sh.diagnose == s.diagnose and sh.benchmark.world == w and sh.world.seed == h.world.seed
-    assert len({m.benchmark.results_md for m in (b, h, s, sh)}) == 4 and len({m.benchmark.figure for m in (b, h, s, sh)}) == 4
+    # the test suite's second held-out world: the same frozen diagnosis, physics unlike both other worlds
+    h2, sh2 = _compose(["+experiment=gap_benchmark_heldout2"]), _compose(["+experiment=gap_benchmark_36_heldout2"])
+    OmegaConf.resolve(h2), OmegaConf.resolve(sh2)
+    assert h2.diagnose == b.diagnose and h2.sim == b.sim and h2.hand == b.hand and h2.benchmark.cases == b.benchmark.cases
+    assert sh2.diagnose == s.diagnose and sh2.benchmark.world == w and sh2.world == h2.world
+    for other in (b, h):
+        assert h2.world.seed != other.world.seed and h2.world.scene != other.world.scene
+        assert h2.world.kinematics != other.world.kinematics and h2.world.effects != other.world.effects
+    presets = (b, h, s, sh, h2, sh2)
+    assert len({m.benchmark.results_md for m in presets}) == 6 and len({m.benchmark.figure for m in presets}) == 6
 
 
 @pytest.mark.slow
