@@ -12,7 +12,7 @@ ARGS        ?=
 .PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark gap-benchmark-heldout gap-benchmark-36 gap-benchmark-36-heldout gap-benchmark-heldout2 gap-benchmark-36-heldout2 fetch-data clean
 
 help: ## list the targets
-	@grep -E '^[a-zA-Z_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-15s %s\n", $$1, $$2}'
+	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-26s %s\n", $$1, $$2}'
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(BOOT_PYTHON) -m venv $(VENV)
