@@ -279,6 +279,27 @@ def test_noise_has_the_requested_snr_and_raises_the_floor(radar, short_chain):
     assert medians[0] < medians[1] < medians[2]
 
 
+def test_noise_draws_are_shared_by_generators_at_the_same_state(radar, short_chain):
+    """Two noise effects seeded alike (two variants of one diagnosis pass) get the same draws, the
+    second from the cache: bit-identical to drawing every ADC sample, and both generators move on alike."""
+    from handradar.radar.chain import range_profiles_from_adc
+    from handradar.sim.effects.noise import _DRAW_CACHE, unit_noise
+
+    shape = (2, 3, radar.chirps_per_frame, radar.n_rx, radar.n_samples)
+    g = torch.Generator().manual_seed(7)
+    z = torch.complex(torch.randn(shape, generator=g), torch.randn(shape, generator=g)) / 2**0.5
+    direct, direct_next = range_profiles_from_adc(z, radar, short_chain), torch.randn(5, generator=g)
+    _DRAW_CACHE.clear()
+    for _ in range(2):  # a miss, then a hit
+        g = torch.Generator().manual_seed(7)
+        drawn = unit_noise(g, shape, torch.float32, radar, short_chain)
+        assert torch.equal(drawn, direct)
+        assert torch.equal(torch.randn(5, generator=g), direct_next)  # the generator moved on as a draw does
+    assert len(_DRAW_CACHE) == 1
+    assert not torch.equal(unit_noise(torch.Generator().manual_seed(8), shape, torch.float32, radar, short_chain),
+                           direct)  # another state, another draw
+
+
 def test_noise_draws_average_to_the_expected_floor(radar, short_chain):
     times = steps(radar, short_chain)
     sk, mk = batch(*hand_window(times))

@@ -15,14 +15,47 @@ expected spectrogram, a noise floor at the right level without one particular sp
 gap diagnosis compares with it (a measured speckle pattern is never reproduced pixel by pixel, so a
 single draw costs SSIM even at the right level); synthetic training data keep one draw
 (draws = 1), like a measurement.
+
+Unit noise is drawn once per generator state: simulators whose generators stand at the same state
+(the variants of one gap-diagnosis pass, all seeded alike for common random numbers) reuse the same
+range-binned draw instead of drawing every ADC sample again (:func:`unit_noise`). The draw is then
+bit-identical and the generator moves on exactly as if it had drawn.
 """
 
 from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
 
 import torch
 
 from handradar.radar.chain import range_profiles_from_adc, white_noise_power, window
 from handradar.sim.effects.base import Effect, Param, register
+
+
+_DRAW_CACHE: OrderedDict[tuple, tuple[torch.Tensor, torch.Tensor]] = OrderedDict()
+_DRAW_CACHE_SIZE = 8  # draws kept: a diagnosis pass needs one batch's draws (`draws` of them, 4 by default) at a time
+
+
+def unit_noise(generator: torch.Generator, shape: tuple[int, ...], dtype: torch.dtype, radar, chain) -> torch.Tensor:
+    """Range profiles (B, F, L, Ch, gated bins) of white complex ADC noise of unit variance per
+    sample, drawn from ``generator`` for ADC cubes of ``shape``; cached by the generator's state,
+    which the call leaves where a draw would have (so later draws are unchanged)."""
+    state = generator.get_state()
+    key = (hashlib.blake2b(state.numpy().tobytes(), digest_size=16).digest(), tuple(shape), dtype,
+           repr(radar), repr(chain))
+    hit = _DRAW_CACHE.get(key)
+    if hit is not None:
+        _DRAW_CACHE.move_to_end(key)
+        generator.set_state(hit[1])
+        return hit[0]
+    z = torch.complex(torch.randn(shape, generator=generator, dtype=dtype),
+                      torch.randn(shape, generator=generator, dtype=dtype)) / 2**0.5
+    noise = range_profiles_from_adc(z, radar, chain)
+    _DRAW_CACHE[key] = (noise, generator.get_state())
+    if len(_DRAW_CACHE) > _DRAW_CACHE_SIZE:
+        _DRAW_CACHE.popitem(last=False)
+    return noise
 
 
 @register
@@ -64,7 +97,5 @@ class Noise(Effect):
         w2 = float((window(chain.range_window, radar.n_samples, dtype=torch.float64) ** 2).sum())
         sigma = torch.sqrt(self.noise_power(signal) / w2)
         shape = (signal.shape[0], signal.shape[1], radar.chirps_per_frame, radar.n_rx, radar.n_samples)
-        z = torch.complex(torch.randn(shape, generator=self.generator, dtype=real),
-                          torch.randn(shape, generator=self.generator, dtype=real)).to(signal.device) / 2**0.5
-        noise = range_profiles_from_adc(z, radar, chain)  # (B, F, L, Ch, bins), unit per-sample variance
+        noise = unit_noise(self.generator, shape, real, radar, chain).to(signal.device)  # (B, F, L, Ch, bins)
         return signal + sigma.to(real) * noise
