@@ -8,6 +8,10 @@ data.root=DIR`` does after composing its config: ingest into a dataset file, the
 readout), with nothing cached beforehand; then the same without the RadarWeightNet readout. The
 phases come from the report's ``timings_s``. Target: the whole diagnosis within 10 minutes.
 
+``noise_grid``: the noise candidate's grid as a diagnosis pass evaluates it (9 SNR values, 4 draws
+each, every simulator seeded alike) on one batch of 8 windows, with the unit-noise cache
+(handradar.sim.effects.noise.unit_noise) and with it switched off (every variant draws again).
+
 Run: ``PYTHONPATH=$PWD/src:$PWD python -m benchmarks bench_gap``.
 """
 
@@ -23,7 +27,7 @@ from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
-from benchmarks.common import Result
+from benchmarks.common import Result, best_time
 from handradar.config import VERSION_BASE, config_dir
 from handradar.data.ingest import ingest
 from handradar.gap.data import load_dataset
@@ -51,6 +55,35 @@ def recordings() -> Path:
     return out
 
 
+def noise_grid(threads: int) -> list[Result]:
+    from handradar.sim.effects import noise
+    from handradar.sim.simulator import Simulator
+
+    radar, chain = instantiate(_conf("radar/awr1843")), instantiate(_conf("chain/default"))
+    shape = (8, chain.frames_per_window(radar), radar.n_loops, radar.chirps_per_loop * radar.n_rx, 8)
+    signal = torch.complex(torch.randn(shape), torch.randn(shape))
+    sims = [Simulator(radar, chain, effects=["noise"], effect_params={"noise": {"snr_db": snr, "draws": 4}})
+            for snr in noise.Noise.params["snr_db"].grid]
+
+    def grid() -> None:
+        noise._DRAW_CACHE.clear()  # a pass starts cold: its first variant draws
+        for sim in sims:
+            sim.effect("noise").reset_rng()
+            sim.spectrogram(signal)
+
+    size = noise._DRAW_CACHE_SIZE
+    try:
+        cached = best_time(grid)
+        noise._DRAW_CACHE_SIZE = 0  # every draw evicted at once: each variant draws again
+        redrawn = best_time(grid)
+    finally:
+        noise._DRAW_CACHE_SIZE = size
+    note = f"{len(sims)} SNR values x 4 draws on 8 windows, {threads} threads"
+    return [Result("noise_grid_cached_draws", cached, "s", note),
+            Result("noise_grid_redrawn", redrawn, "s", f"{note}; the cache off"),
+            Result("noise_grid_speedup", redrawn / cached, "x", "redrawn / cached")]
+
+
 def run() -> list[Result]:
     threads = int(os.environ.get("HANDRADAR_BENCH_THREADS", "2"))
     torch.set_num_threads(threads)
@@ -59,7 +92,7 @@ def run() -> list[Result]:
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
         sim_cfg = compose("diagnose", overrides=["data.root=/unused"]).sim  # the paper's simulator, as diagnose.py has it
     diag_cfg = OmegaConf.to_container(_conf("diagnose").diagnose, resolve=True)
-    out: list[Result] = []
+    out: list[Result] = noise_grid(threads)
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         ingest(root, Path(tmp) / "data.h5", chain, progress=False)
