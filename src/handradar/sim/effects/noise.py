@@ -32,7 +32,6 @@ import torch
 from handradar.radar.chain import range_profiles_from_adc, white_noise_power, window
 from handradar.sim.effects.base import Effect, Param, register
 
-
 _DRAW_CACHE: OrderedDict[tuple, tuple[torch.Tensor, torch.Tensor]] = OrderedDict()
 _DRAW_CACHE_SIZE = 8  # draws kept: a diagnosis pass needs one batch's draws (`draws` of them, 4 by default) at a time
 
