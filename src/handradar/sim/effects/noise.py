@@ -29,20 +29,26 @@ from collections import OrderedDict
 
 import torch
 
-from handradar.radar.chain import range_profiles_from_adc, white_noise_power, window
+from handradar.radar.chain import (
+    ChainConfig,
+    range_profiles_from_adc,
+    white_noise_power,
+    window,
+)
+from handradar.radar.config import RadarConfig
 from handradar.sim.effects.base import Effect, Param, register
 
 _DRAW_CACHE: OrderedDict[tuple, tuple[torch.Tensor, torch.Tensor]] = OrderedDict()
 _DRAW_CACHE_SIZE = 8  # draws kept: a diagnosis pass needs one batch's draws (`draws` of them, 4 by default) at a time
 
 
-def unit_noise(generator: torch.Generator, shape: tuple[int, ...], dtype: torch.dtype, radar, chain) -> torch.Tensor:
+def unit_noise(generator: torch.Generator, shape: tuple[int, ...], dtype: torch.dtype, radar: RadarConfig,
+               chain: ChainConfig) -> torch.Tensor:
     """Range profiles (B, F, L, Ch, gated bins) of white complex ADC noise of unit variance per
     sample, drawn from ``generator`` for ADC cubes of ``shape``; cached by the generator's state,
     which the call leaves where a draw would have (so later draws are unchanged)."""
     state = generator.get_state()
-    key = (hashlib.blake2b(state.numpy().tobytes(), digest_size=16).digest(), tuple(shape), dtype,
-           repr(radar), repr(chain))
+    key = (hashlib.blake2b(state.numpy().tobytes(), digest_size=16).digest(), tuple(shape), dtype, radar, chain)
     hit = _DRAW_CACHE.get(key)
     if hit is not None:
         _DRAW_CACHE.move_to_end(key)
