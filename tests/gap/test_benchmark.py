@@ -7,18 +7,19 @@ import json
 import h5py
 import numpy as np
 import pytest
+import torch
 from omegaconf import OmegaConf
 
 from handradar.data.hdf5 import open_writer
 from handradar.gap.benchmark import (
     case_world,
     cases,
-    layout_oracle,
+    effect_reference,
+    radar_signature,
     results_markdown,
     run_benchmark,
     score,
     split_text,
-    turned,
 )
 from handradar.vocab import EFFECTS as EFFECT_NAMES
 from tests.gap.conftest import rows, simulate
@@ -73,9 +74,10 @@ def test_inconclusive_is_wrong_for_effects_and_controls_and_shows_its_estimate()
     assert "controls: 1 of 2 say none; inconclusive: 1 of 2 withheld effects, 1 of 2 controls." in md
 
 
-def _spectrogram_file(path, spec):
+def _spectrogram_file(path, spec, starts=None):
     with h5py.File(path, "w") as f:
         f["spectrograms"] = np.clip(spec, 0.0, 1.0).astype(np.float32)
+        f["window_start_s"] = np.zeros(len(spec)) if starts is None else np.asarray(starts, np.float64)
     return path
 
 
@@ -84,43 +86,56 @@ def test_settings_line_says_how_the_rows_were_used():
     assert split_text({"folds": 3, "calibration_fraction": 0.5}) == "cross-fitting in 3 folds, every row scored out of fold"
 
 
-def test_layout_oracle_credits_a_systematic_effect_and_not_speckle(tmp_path):
-    """A broad added component reproduces across facet layouts (gap_closed > 0); an effect that only
-    redraws the speckle does not (<= 0): the oracle tells the two apart."""
+def test_effect_reference_adds_the_worlds_change_to_the_simulator():
+    """The reference column: the world's change (case minus effect-free) added to the simulator's
+    baseline. A change that is all the gap closes it whole; one the simulator already has (the
+    effect-free world equal to the case) closes nothing; half of a change closes a part."""
     rng = np.random.default_rng(0)
-    n = 40
-    speckle = lambda: 0.3 * rng.random((n, 64, 32))  # noqa: E731  (a layout's own fine structure)
-    blob = np.zeros((64, 32))
-    blob[24:40, 8:24] = 0.5
-    layout0, layout1 = speckle(), speckle()
-    f = lambda name, x: _spectrogram_file(tmp_path / f"{name}.h5", x)  # noqa: E731
-    clean_turned = f("clean1", layout1)
-    systematic = layout_oracle(f("sys0", layout0 + blob), clean_turned, f("sys1", layout1 + blob), n_boot=300)
-    assert systematic["oracle_ci95"][0] > 0.1
-    redrawn = layout_oracle(f("spk0", layout0 + speckle()), clean_turned, f("spk1", layout1 + speckle()), n_boot=300)
-    assert redrawn["oracle_gap_closed"] <= 0
-    assert turned({"scene": {"finger_sides": 8}, "subjects": 2}, 0.5) == {"scene": {"finger_sides": 8, "facet_turn": 0.5},
-                                                                          "subjects": 2}
+    sim = torch.from_numpy(0.5 * rng.random((12, 64, 32)).astype(np.float32))
+    blob = torch.zeros(64, 32)
+    blob[20:40, 4:20] = 0.4
+    case = sim + blob
+    whole = effect_reference(case, sim, sim, n_boot=300)
+    assert whole["reference_gap_closed"] > 0.99 and whole["reference_ci95"][0] > 0.99
+    assert abs(effect_reference(case, case, sim, n_boot=300)["reference_gap_closed"]) < 1e-6
+    half = effect_reference(case, sim + blob / 2, sim, n_boot=300)["reference_gap_closed"]
+    assert 0.1 < half < 0.99
+
+
+def test_truth_side_comparisons_refuse_rows_over_other_windows(tmp_path):
+    """Rows over other stretches of their recordings differ by more than any effect: the signature
+    compares a case with the effect-free world built at its own windows, and refuses anything else."""
+    x = np.random.default_rng(0).random((6, 64, 32))
+    case = _spectrogram_file(tmp_path / "case.h5", x, [0.0, 0.1, 0.2, 0.0, 0.0, 0.0])
+    same = _spectrogram_file(tmp_path / "same.h5", x, [0.0, 0.1, 0.2, 0.0, 0.0, 0.0])
+    moved = _spectrogram_file(tmp_path / "moved.h5", x, [0.0, 0.1, 0.3, 0.0, 0.0, 0.0])
+    assert radar_signature(case, same)["signature_mean"] < 1e-6
+    with pytest.raises(ValueError, match="other windows"):
+        radar_signature(case, moved)
     with pytest.raises(ValueError, match="shapes differ"):
-        layout_oracle(f("short", layout0[:5]), clean_turned, clean_turned)
+        radar_signature(case, _spectrogram_file(tmp_path / "short.h5", x[:5], [0.0] * 5))
 
 
-def fake_world(world_cfg, radar, chain, cache_dir):
+def fake_world(world_cfg, radar, chain, cache_dir, window_starts_s=None):
     """A stand-in for handradar.world.build_world_dataset: the simulator with the world's enabled
-    vocabulary effects (antenna_pattern at q = 6) makes the 'measured' spectrograms."""
-    CALLS.append(world_cfg)
+    vocabulary effects (antenna_pattern at q = 6) makes the 'measured' spectrograms. Like the world's,
+    its windows follow the radar data: with antenna_pattern on, every row's starts at 0.1 s, else at 0."""
+    CALLS.append({**world_cfg, "window_starts_s": window_starts_s})
     on = [n for n, e in world_cfg["effects"].items() if e.get("enabled") and n in EFFECT_NAMES]
+    starts = window_starts_s or [0.1 if "antenna_pattern" in on else 0.0] * 8
     rs, labels, meta = rows(radar, chain, 8, seed=5)
     spec = simulate(radar, chain, rs, {n: ({"q": 6.0} if n == "antenna_pattern" else {}) for n in on})
-    turn = float((world_cfg.get("scene") or {}).get("facet_turn", 0.0))
-    if turn:  # another facet layout: the same scene with other fine structure
-        spec = np.clip(spec + 0.05 * np.random.default_rng(1).standard_normal(spec.shape), 0.0, 1.0).astype(np.float32)
-    path = cache_dir / f"fake_{'_'.join(on) or 'none'}{'_turned' if turn else ''}.h5"
     cache_dir.mkdir(parents=True, exist_ok=True)
+    return _dataset_file(cache_dir / f"fake_{'_'.join(on) or 'none'}{'_aligned' if window_starts_s else ''}.h5",
+                         spec, rs, labels, meta, radar, chain, starts)
+
+
+def _dataset_file(path, spec, rs, labels, meta, radar, chain, starts=None):
+    """A handradar.dataset/1 file of the rows ``rs`` with spectrograms ``spec`` and window starts (s)."""
     with open_writer(path, classes=["g0", "g1", "g2", "g3"], radar=radar, chain=chain, skeleton_rate_hz=100.0,
                      n_steps=rs.skeletons.shape[1], config_hash="fake") as w:
         for i in range(len(rs)):
-            w.append(spec[i], int(labels[i]), rs.skeletons[i], rs.masks[i], 0.0,
+            w.append(spec[i], int(labels[i]), rs.skeletons[i], rs.masks[i], 0.0 if starts is None else starts[i],
                      {"gesture": str(meta["gesture"][i]), "hands": int(meta["hands"][i]), "subject": str(meta["subject"][i])})
     return path
 
@@ -136,7 +151,7 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
         "diagnose": {"candidates": ["antenna_pattern", "palm"], "radarweightnet": False, "n_boot": 300, "greedy_max": 1},
         "world": {"seed": 7, "subjects": 3},  # the world group: benchmark.world goes on top
         "benchmark": {"builder": "tests.gap.test_benchmark.fake_world",
-                      "cases": ["antenna_pattern", "nothing"], "world": {"subjects": 1}, "layout_turn": 0.5,
+                      "cases": ["antenna_pattern", "nothing"], "world": {"subjects": 1},
                       "state_dir": str(tmp_path / "state"), "figures_dir": str(tmp_path / "docs" / "figures"),
                       "results_md": str(tmp_path / "docs" / "gap_benchmark.md")}})
     CALLS.clear()
@@ -148,11 +163,15 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
     assert out["scores"]["effects_correct"] == 1 and out["scores"]["controls_correct"] == 1
     assert "| antenna_pattern | antenna_pattern | antenna_pattern | yes |" in md.read_text()
     assert (tmp_path / "run" / "cases" / "antenna_pattern" / "gap_report.json").is_file()
-    # 2 cases + the effect-free world once, + the oracle's turned worlds (antenna_pattern, effect-free)
-    assert len(CALLS) == 5 and all(c["subjects"] == 1 and c["seed"] == 7 for c in CALLS)
-    assert sum(c.get("scene", {}).get("facet_turn") == 0.5 for c in CALLS) == 2
+    # 2 cases + the effect-free world, once with its own windows and once with antenna_pattern's (they differ)
+    assert len(CALLS) == 4 and all(c["subjects"] == 1 and c["seed"] == 7 for c in CALLS)
+    aligned = [c for c in CALLS if c["window_starts_s"] is not None]
+    assert len(aligned) == 1 and aligned[0]["window_starts_s"] == [0.1] * 8 and aligned[0]["effects"]["antenna_pattern"]["enabled"] is False
+    assert (by["antenna_pattern"]["windows_moved"], by["nothing"]["windows_moved"]) == (8, 0)
     assert by["nothing"]["signature_mean"] < 1e-6 < by["antenna_pattern"]["signature_mean"]
-    assert by["antenna_pattern"]["oracle_ci95"][0] > 0 and by["nothing"].get("oracle_gap_closed") is None
+    # the world's antenna change added to the diagnosis's baseline (the simulator without it) closes
+    # the gap; the control has no change to add
+    assert by["antenna_pattern"]["reference_ci95"][0] > 0.5 and by["nothing"].get("reference_gap_closed") is None
     CALLS.clear()
     md.write_text(md.read_text() + "hand-written analysis\n")
     run_benchmark(cfg, tmp_path / "run2")  # every case resumes from the state folder: no world is built

@@ -10,6 +10,7 @@ import torch
 
 from handradar.radar.chain import (
     ChainConfig,
+    capture_spectrogram,
     column_times_s,
     gate_bins,
     measured_spectrogram,
@@ -205,8 +206,18 @@ def test_window_selection_finds_the_motion(radar, chain):
     tt = np.clip(t, 1.0, 2.6)
     ranges = (0.5 - 0.4 * (tt - 1.0) / 1.6).reshape(n_frames, -1, 1, 1)
     adc = beat_signal(radar, ranges, np.full(ranges.shape, 1000.0))
-    _, start = measured_spectrogram(adc, radar, chain)
+    spec, start = measured_spectrogram(adc, radar, chain)
     assert start == 10
+    # a window given instead of chosen: the same one gives the same spectrogram, another its own frames
+    profiles = range_profiles_from_adc(torch.as_tensor(adc), radar, chain)
+    same, _ = capture_spectrogram(profiles, radar, chain, start=10)
+    torch.testing.assert_close(same, spec)
+    fpw = chain.frames_per_window(radar)
+    early, start = capture_spectrogram(profiles, radar, chain, start=0)
+    assert start == 0
+    torch.testing.assert_close(early, spectrogram_from_profiles(profiles[..., :fpw, :, :, :], chain))
+    with pytest.raises(ValueError, match="window start frame 29 outside"):
+        capture_spectrogram(profiles, radar, chain, start=29)
 
 
 def test_column_times_follow_frames(radar, chain):

@@ -138,6 +138,31 @@ def test_build_world_dataset_caches_and_is_atomic(world, radar, chain, tmp_path,
     assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]  # nothing else left behind
 
 
+def test_a_world_dataset_can_take_another_datasets_windows(world, radar, chain, tmp_path):
+    """window_starts_s imposes each row's window (the truth-side comparisons of the gap benchmark): its
+    own windows give back its data bit for bit, other windows move spectrogram and skeleton together,
+    and each set of windows is a dataset of its own in the cache."""
+    small = dataclasses.replace(world, gestures=("grasp", "double_hand_clap"), subjects=1, capture_frames=20)
+    own = build_world_dataset(small, radar, chain, tmp_path, progress=False)
+    with h5py.File(own) as h5:
+        starts, spec, skel = h5["window_start_s"][()], h5["spectrograms"][()], h5["skeletons"][()]
+    again = build_world_dataset(small, radar, chain, tmp_path, progress=False, window_starts_s=starts.tolist())
+    assert again != own
+    with h5py.File(again) as h5:
+        np.testing.assert_array_equal(h5["spectrograms"][()], spec)
+        np.testing.assert_array_equal(h5["skeletons"][()], skel)
+    last = small.capture_frames - chain.frames_per_window(radar)
+    other = [(0 if t > 0 else last) * radar.frame_period_s for t in starts]
+    moved = build_world_dataset(small, radar, chain, tmp_path, progress=False, window_starts_s=other)
+    with h5py.File(moved) as h5:
+        np.testing.assert_allclose(h5["window_start_s"][()], other)
+        assert not np.array_equal(h5["spectrograms"][()], spec) and not np.array_equal(h5["skeletons"][()], skel)
+    with pytest.raises(ValueError, match="3 window starts given for a world of 2 recordings"):
+        build_world_dataset(small, radar, chain, tmp_path, progress=False, window_starts_s=[0.0] * 3)
+    with pytest.raises(ValueError, match="must fall on radar frames"):
+        build_world_dataset(small, radar, chain, tmp_path, progress=False, window_starts_s=[0.0, 0.3 * radar.frame_period_s])
+
+
 @pytest.mark.slow
 def test_two_workers_give_the_same_dataset(world, radar, chain, tmp_path):
     small = dataclasses.replace(world, gestures=("grasp", "slide", "hand_merge"), subjects=1, capture_frames=16)

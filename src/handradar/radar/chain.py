@@ -327,17 +327,23 @@ def measured_spectrogram(adc: np.ndarray | torch.Tensor, radar: RadarConfig, cha
     return capture_spectrogram(range_profiles_from_adc(torch.as_tensor(adc), radar, chain), radar, chain)
 
 
-def capture_spectrogram(profiles: torch.Tensor, radar: RadarConfig, chain: ChainConfig) -> tuple[torch.Tensor, int]:
+def capture_spectrogram(profiles: torch.Tensor, radar: RadarConfig, chain: ChainConfig,
+                        start: int | None = None) -> tuple[torch.Tensor, int]:
     """A whole capture's per-range-bin signal (frames, loops, channels, bins) -> (spectrogram, window start frame).
 
     The second half of :func:`measured_spectrogram`, shared with generators that reach the
-    per-range-bin signal without an ADC cube (the reference world's fast path).
+    per-range-bin signal without an ADC cube (the reference world's fast path). ``start``: the
+    window's first frame, given instead of chosen (e.g. to compare two worlds row by row at the
+    same window); None selects the window holding the most energy, as for measured data.
     """
     fpw = chain.frames_per_window(radar)
     if profiles.shape[-4] < fpw:
         raise ValueError(f"capture has {profiles.shape[-4]} frames, fewer than the {fpw} of one spectrogram")
-    full = stft_power(remove_static_clutter(profiles) if chain.clutter_removal else profiles, chain)
-    start = select_window_start(full, chain, chain.columns_per_frame(radar))
+    if start is None:
+        full = stft_power(remove_static_clutter(profiles) if chain.clutter_removal else profiles, chain)
+        start = select_window_start(full, chain, chain.columns_per_frame(radar))
+    elif not 0 <= start <= profiles.shape[-4] - fpw:
+        raise ValueError(f"window start frame {start} outside the capture's 0..{profiles.shape[-4] - fpw}")
     return spectrogram_from_profiles(profiles[..., start:start + fpw, :, :, :], chain), start
 
 

@@ -6,7 +6,10 @@ which others are generated with it, nor on the worker that generates it.
 
 - :func:`write_recording` / :func:`write_world_recordings`: ``handradar.recording/1`` folders (ADC path).
 - :func:`build_world_dataset`: the HDF5 dataset straight from the fast path (same physics, same
-  noise draw), cached under a hash of the configuration and written atomically.
+  noise draw), cached under a hash of the configuration and written atomically. Each row's window
+  is chosen from its radar data, as ingest does; ``window_starts_s`` imposes another dataset's
+  windows instead, so that two worlds can be compared row by row over the same stretch of motion
+  (an effect that changes the radar data can move the chosen window by tenths of a second).
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -159,13 +162,17 @@ def write_recording(world: Any, radar: RadarConfig, spec: RecordingSpec, folder:
     return folder
 
 
-def fast_example(world: Any, radar: RadarConfig, chain: ChainConfig, spec: RecordingSpec) -> dict:
-    """One dataset row from the fast path: spectrogram, label, skeleton window (as ingest would give)."""
+def fast_example(world: Any, radar: RadarConfig, chain: ChainConfig, spec: RecordingSpec,
+                 window_start_frame: int | None = None) -> dict:
+    """One dataset row from the fast path: spectrogram, label, skeleton window (as ingest would give).
+
+    window_start_frame: the window's first radar frame; None chooses it from the radar data as ingest does.
+    """
     world = world_config(world)
     sim = simulate(world, radar, spec)
     profiles = fast_profiles(sim.tracks, sim.radar, chain, sim.radar.n_frames, world.effects, sim.rng_noise,
                              sim.rng_quant, sim.noise_sigma)
-    spec_map, start = capture_spectrogram(profiles, sim.radar, chain)
+    spec_map, start = capture_spectrogram(profiles, sim.radar, chain, window_start_frame)
     seq = sim.leap.as_read()  # exactly what ingest would read from the recording's leap.jsonl
     t0 = start * sim.radar.frame_period_s
     rel = window_times(chain.frames_per_window(sim.radar), sim.radar.frame_period_s, world.skeleton_rate_hz)
@@ -206,32 +213,48 @@ def _run_parallel(fn: Callable, jobs: list, workers: int, progress: bool, desc: 
         bar.close()
 
 
-def dataset_path(world: Any, radar: RadarConfig, chain: ChainConfig, cache_dir: str | Path) -> tuple[Path, str]:
-    """Cache file of the world's dataset and its config hash (radar, chain, world physics, generator version)."""
+def dataset_path(world: Any, radar: RadarConfig, chain: ChainConfig, cache_dir: str | Path,
+                 window_starts: Sequence[int] | None = None) -> tuple[Path, str]:
+    """Cache file of the world's dataset and its config hash (radar, chain, world physics, generator
+    version, and the imposed window start frames if any)."""
     world = world_config(world)
     physics = {k: v for k, v in world.to_dict().items() if k != "workers"}  # workers do not change the data
     if physics["scene"]["facet_turn"] == 0.0:  # added later: at its default the data is unchanged, so are the keys
         del physics["scene"]["facet_turn"]
-    h = config_hash(physics, capture_radar(radar, world), chain, WORLD_VERSION, "fast-path")
+    parts = (physics, capture_radar(radar, world), chain, WORLD_VERSION, "fast-path")
+    h = config_hash(*parts, [int(s) for s in window_starts]) if window_starts is not None else config_hash(*parts)
     return Path(cache_dir) / f"world_{h}.h5", h
 
 
+def window_start_frames(window_starts_s: Sequence[float], radar: RadarConfig, n_rows: int) -> list[int]:
+    """Window start times (s, a dataset's ``window_start_s``, row by row) -> radar frame indices."""
+    if len(window_starts_s) != n_rows:
+        raise ValueError(f"{len(window_starts_s)} window starts given for a world of {n_rows} recordings")
+    frames = [int(round(float(t) / radar.frame_period_s)) for t in window_starts_s]
+    off = [f"{t:g} s" for t, f in zip(window_starts_s, frames) if abs(f * radar.frame_period_s - float(t)) > 1e-6]
+    if off:
+        raise ValueError(f"window starts must fall on radar frames ({radar.frame_period_s * 1e3:g} ms apart): {off[:3]}")
+    return frames
+
+
 def build_world_dataset(world_cfg: Any, radar: RadarConfig, chain: ChainConfig, cache_dir: str | Path, *,
-                        progress: bool = True) -> Path:
+                        progress: bool = True, window_starts_s: Sequence[float] | None = None) -> Path:
     """The world's HDF5 dataset (handradar.dataset/1) via the fast path; cached by config hash.
 
     world_cfg: the ``world`` config node (DictConfig / dict) or a WorldConfig. Returns the cached
     file when it exists; otherwise builds it with ``world.workers`` processes (spawned: a calling
     script needs the usual ``if __name__ == "__main__":`` guard). An interrupted build leaves
-    nothing behind.
+    nothing behind. window_starts_s: each row's window start (s; another world's ``window_start_s``,
+    in the same row order) instead of the window its own radar data would choose.
     """
     world = world_config(world_cfg)
-    path, h = dataset_path(world, radar, chain, cache_dir)
-    if path.is_file():
-        return path
     cap = capture_radar(radar, world)
     specs = recording_specs(world)
-    jobs = [(world, radar, chain, s) for s in specs]
+    starts = None if window_starts_s is None else window_start_frames(window_starts_s, cap, len(specs))
+    path, h = dataset_path(world, radar, chain, cache_dir, starts)
+    if path.is_file():
+        return path
+    jobs = [(world, radar, chain, s, None if starts is None else starts[i]) for i, s in enumerate(specs)]
     with open_writer(path, classes=GESTURES, radar=cap, chain=chain, skeleton_rate_hz=world.skeleton_rate_hz,
                      n_steps=skeleton_steps(chain, cap, world.skeleton_rate_hz), config_hash=h,
                      extra_attrs={"world_config": json.dumps(world.to_dict()), "source": "handradar.world"}) as w:

@@ -1,0 +1,96 @@
+"""How visible is each withheld effect, in the radar data and to the simulator? (``python -m benchmarks.world_signatures``)
+
+The truth-side columns of the gap benchmark's table (handradar.gap.benchmark.truth_side), for every
+case of a gap benchmark preset, without diagnosing anything:
+
+- the radar signature: 1 - SSIM between the case's world and the effect-free world, row by row over
+  the case's windows (mean / median);
+- the world's change on the simulator: gap_closed [95 % CI] of the baseline simulator plus exactly
+  the world's change, row by row (handradar.gap.benchmark.effect_reference): the reference for what
+  a candidate of the effect can be credited with. The baseline here is step 0's generic
+  calibration on every row (the benchmark uses its diagnosis's baseline on the evaluation rows).
+
+Printed beside them, for comparison: the signature with each world's own windows (what the
+benchmark's tables reported before the two were aligned) and how many rows the effect moved to
+another window. The chain picks each row's window from its radar data, so an effect that changes
+the data can move it by tenths of a second, and two rows over other stretches of the motion differ
+by far more than the effect.
+
+    python -m benchmarks.world_signatures +experiment=gap_benchmark_36
+    python -m benchmarks.world_signatures +experiment=gap_benchmark_36_heldout2
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import torch
+from hydra import compose, initialize_config_dir
+from hydra.utils import get_method, instantiate
+from omegaconf import OmegaConf
+
+from handradar.config import VERSION_BASE, config_dir
+from handradar.gap.benchmark import CONTROL_NOTHING, Case, case_world, cases, truth_side
+from handradar.gap.data import load_dataset
+from handradar.gap.engine import VariantEngine
+from handradar.gap.fit import GENERIC_SETTINGS, calibrate_settings, generic_grid
+from handradar.metrics import per_example_ssim
+from handradar.sim.factory import SimFactory
+
+
+def _spectrograms(path: Path) -> torch.Tensor:
+    with h5py.File(path, "r") as f:
+        return torch.from_numpy(f["spectrograms"][()].astype(np.float32))
+
+
+def calibrated_baseline(sim_cfg, diag: dict, path: Path) -> np.ndarray:
+    """(N, doppler, columns) the baseline simulator on every row of ``path``, step 0's generic
+    settings calibrated on every row (the diagnosis's grids)."""
+    data = load_dataset(path)
+    factory = SimFactory.from_config(sim_cfg, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
+    idx = np.arange(len(data))
+    grid = generic_grid({name: diag.get(name) for name in GENERIC_SETTINGS})
+    best, _ = calibrate_settings(factory, factory.effects, data.rows, idx, data.measured, grid)
+    return VariantEngine(factory.replace(**best), factory.effects, data.rows).spectrograms([{}], idx)[0]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("overrides", nargs="*", help="diagnose.py overrides, e.g. +experiment=gap_benchmark_36")
+    args = ap.parse_args()
+    with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
+        cfg = compose("diagnose", overrides=args.overrides)
+    bench = cfg.benchmark
+    radar, chain = instantiate(cfg.radar), instantiate(cfg.chain)
+    build_world = get_method(str(bench.builder))
+    world = OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}), resolve=True)
+    strengths = OmegaConf.to_container(bench.strengths, resolve=True) if bench.get("strengths") is not None else {}
+    diag = OmegaConf.to_container(cfg.diagnose, resolve=True)
+    cache = Path(cfg.paths.cache_dir) / "world"
+    clean_cfg = case_world(world, Case(CONTROL_NOTHING, (), "none"))
+    clean = build_world(clean_cfg, radar, chain, cache)
+    print("| case | rows | windows moved | radar signature, case's windows (mean / median) | radar signature, each "
+          "world's own windows (mean / median) | world's change on the simulator: gap_closed [95 % CI] |")
+    print("|---|---|---|---|---|---|")
+    for case in cases(list(bench.cases)):
+        if case.name == CONTROL_NOTHING:
+            continue
+        t0 = time.perf_counter()
+        path = build_world(case_world(world, case, strengths), radar, chain, cache)
+        baseline = calibrated_baseline(cfg.sim, diag, path)
+        res = truth_side(build_world, clean_cfg, path, clean, radar=radar, chain=chain, cache_dir=cache,
+                         baseline=baseline, rows=np.arange(len(baseline)))
+        own = 1.0 - np.asarray(per_example_ssim(_spectrograms(clean), _spectrograms(path)))
+        ref = ("-" if "reference_gap_closed" not in res else
+               f"{res['reference_gap_closed']:+.3f} [{res['reference_ci95'][0]:+.3f}, {res['reference_ci95'][1]:+.3f}]")
+        print(f"| {case.name} | {len(own)} | {res['windows_moved']} | {res['signature_mean']:.4f} / "
+              f"{res['signature_median']:.4f} | {own.mean():.4f} / {np.median(own):.4f} | {ref} |"
+              f"  <!-- {time.perf_counter() - t0:.0f} s -->", flush=True)
+
+
+if __name__ == "__main__":
+    main()
