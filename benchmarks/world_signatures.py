@@ -8,7 +8,9 @@ case of a gap benchmark preset, without diagnosing anything:
 - the world's change on the simulator: gap_closed [95 % CI] of the baseline simulator plus exactly
   the world's change, row by row (handradar.gap.benchmark.effect_reference): the reference for what
   a candidate of the effect can be credited with. The baseline here is step 0's generic
-  calibration on every row (the benchmark uses its diagnosis's baseline on the evaluation rows).
+  calibration on every row (the benchmark uses its diagnosis's baseline on the evaluation rows);
+- r: the Pearson correlation, over every pixel, of the candidate's change (at its default
+  parameters here; the benchmark uses the fitted candidate) with the world's.
 
 Printed beside them, for comparison: the signature with each world's own windows (what the
 benchmark's tables reported before the two were aligned) and how many rows the effect moved to
@@ -40,6 +42,7 @@ from handradar.gap.engine import VariantEngine
 from handradar.gap.fit import GENERIC_SETTINGS, calibrate_settings, generic_grid
 from handradar.metrics import per_example_ssim
 from handradar.sim.factory import SimFactory
+from handradar.vocab import EFFECTS
 
 
 def _spectrograms(path: Path) -> torch.Tensor:
@@ -47,15 +50,18 @@ def _spectrograms(path: Path) -> torch.Tensor:
         return torch.from_numpy(f["spectrograms"][()].astype(np.float32))
 
 
-def calibrated_baseline(sim_cfg, diag: dict, path: Path) -> np.ndarray:
-    """(N, doppler, columns) the baseline simulator on every row of ``path``, step 0's generic
-    settings calibrated on every row (the diagnosis's grids)."""
+def calibrated_baseline(sim_cfg, diag: dict, path: Path, effect: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """(N, doppler, columns) spectrograms of every row of ``path``: the baseline simulator, step 0's
+    generic settings calibrated on every row (the diagnosis's grids), and the baseline plus the
+    candidate ``effect`` at its default parameters (None: not a candidate of the vocabulary)."""
     data = load_dataset(path)
     factory = SimFactory.from_config(sim_cfg, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
     idx = np.arange(len(data))
     grid = generic_grid({name: diag.get(name) for name in GENERIC_SETTINGS})
     best, _ = calibrate_settings(factory, factory.effects, data.rows, idx, data.measured, grid)
-    return VariantEngine(factory.replace(**best), factory.effects, data.rows).spectrograms([{}], idx)[0]
+    variants = [{}, {effect: {}}] if effect in EFFECTS else [{}]
+    specs = VariantEngine(factory.replace(**best), factory.effects, data.rows).spectrograms(variants, idx)
+    return specs[0], (specs[1] if len(specs) > 1 else None)
 
 
 def main() -> None:
@@ -74,21 +80,23 @@ def main() -> None:
     clean_cfg = case_world(world, Case(CONTROL_NOTHING, (), "none"))
     clean = build_world(clean_cfg, radar, chain, cache)
     print("| case | rows | windows moved | radar signature, case's windows (mean / median) | radar signature, each "
-          "world's own windows (mean / median) | world's change on the simulator: gap_closed [95 % CI] |")
-    print("|---|---|---|---|---|---|")
+          "world's own windows (mean / median) | world's change on the simulator: gap_closed [95 % CI] | "
+          "candidate's change vs the world's, r (candidate at its default parameters) |")
+    print("|---|---|---|---|---|---|---|")
     for case in cases(list(bench.cases)):
         if case.name == CONTROL_NOTHING:
             continue
         t0 = time.perf_counter()
         path = build_world(case_world(world, case, strengths), radar, chain, cache)
-        baseline = calibrated_baseline(cfg.sim, diag, path)
+        baseline, candidate = calibrated_baseline(cfg.sim, diag, path, case.truth)
         res = truth_side(build_world, clean_cfg, path, clean, radar=radar, chain=chain, cache_dir=cache,
-                         baseline=baseline, rows=np.arange(len(baseline)))
+                         baseline=baseline, rows=np.arange(len(baseline)), candidate=candidate)
         own = 1.0 - np.asarray(per_example_ssim(_spectrograms(clean), _spectrograms(path)))
         ref = ("-" if "reference_gap_closed" not in res else
                f"{res['reference_gap_closed']:+.3f} [{res['reference_ci95'][0]:+.3f}, {res['reference_ci95'][1]:+.3f}]")
         print(f"| {case.name} | {len(own)} | {res['windows_moved']} | {res['signature_mean']:.4f} / "
-              f"{res['signature_median']:.4f} | {own.mean():.4f} / {np.median(own):.4f} | {ref} |"
+              f"{res['signature_median']:.4f} | {own.mean():.4f} / {np.median(own):.4f} | {ref} | "
+              f"{'-' if 'change_correlation' not in res else format(res['change_correlation'], '.3f')} |"
               f"  <!-- {time.perf_counter() - t0:.0f} s -->", flush=True)
 
 

@@ -100,6 +100,9 @@ def test_effect_reference_adds_the_worlds_change_to_the_simulator():
     assert abs(effect_reference(case, case, sim, n_boot=300)["reference_gap_closed"]) < 1e-6
     half = effect_reference(case, sim + blob / 2, sim, n_boot=300)["reference_gap_closed"]
     assert 0.1 < half < 0.99
+    # a candidate that adds the blob changes the spectrograms as the world does; one that removes it, the other way
+    assert effect_reference(case, sim, sim, sim + 0.5 * blob, n_boot=300)["change_correlation"] == pytest.approx(1.0)
+    assert effect_reference(case, sim, sim, sim - blob, n_boot=300)["change_correlation"] == pytest.approx(-1.0)
 
 
 def test_truth_side_comparisons_refuse_rows_over_other_windows(tmp_path):
@@ -172,6 +175,7 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
     # the world's antenna change added to the diagnosis's baseline (the simulator without it) closes
     # the gap; the control has no change to add
     assert by["antenna_pattern"]["reference_ci95"][0] > 0.5 and by["nothing"].get("reference_gap_closed") is None
+    assert by["antenna_pattern"]["change_correlation"] > 0.5  # the fitted candidate is the world's own effect
     CALLS.clear()
     md.write_text(md.read_text() + "hand-written analysis\n")
     run_benchmark(cfg, tmp_path / "run2")  # every case resumes from the state folder: no world is built

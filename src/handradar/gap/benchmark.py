@@ -168,8 +168,8 @@ def radar_signature(case_path: str | Path, clean_path: str | Path) -> dict:
     return {"signature_mean": float(np.mean(d)), "signature_median": float(np.median(d))}
 
 
-def effect_reference(measured: torch.Tensor, clean: torch.Tensor, baseline: torch.Tensor, *, n_boot: int = 2000,
-                     seed: int = 0) -> dict:
+def effect_reference(measured: torch.Tensor, clean: torch.Tensor, baseline: torch.Tensor,
+                     candidate: torch.Tensor | None = None, *, n_boot: int = 2000, seed: int = 0) -> dict:
     """The world's own change added to the simulator: gap_closed [95 % CI] of ``baseline`` (the
     calibrated baseline simulator's spectrograms) plus, row by row, ``measured`` (the case's) minus
     ``clean`` (the effect-free world's over the same windows), clipped to [0, 1], against ``measured``.
@@ -180,19 +180,28 @@ def effect_reference(measured: torch.Tensor, clean: torch.Tensor, baseline: torc
     effect that scales the returns the simulator already has is not additive, and a candidate can
     also close some generic gap), but an effect whose reference sits below ``min_gap_closed`` leaves
     a candidate little to be credited with. Truth-side context, never seen by the diagnosis.
+
+    With ``candidate`` (the baseline plus the effect's candidate, same rows): ``change_correlation``,
+    the Pearson r over every pixel between the candidate's change (candidate - baseline) and the
+    world's (measured - clean): whether the candidate changes the spectrograms the way the effect does.
     """
     b = bootstrap_gap_closed(per_example_ssim(measured, baseline),
                              per_example_ssim(measured, (baseline + measured - clean).clamp(0.0, 1.0)),
                              n_boot=n_boot, seed=seed)
-    return {"reference_gap_closed": b.estimate, "reference_ci95": list(b.ci95)}
+    out = {"reference_gap_closed": b.estimate, "reference_ci95": list(b.ci95)}
+    if candidate is not None:
+        world, cand = (measured - clean).flatten().double(), (candidate - baseline).flatten().double()
+        out["change_correlation"] = float(torch.corrcoef(torch.stack([world, cand]))[0, 1])
+    return out
 
 
 def truth_side(build_world: Callable[..., Path], clean_cfg: Mapping, path: Path, clean: Path, *, radar: RadarConfig,
-               chain: ChainConfig, cache_dir: Path, baseline: np.ndarray, rows: np.ndarray, n_boot: int = 2000,
-               seed: int = 0) -> dict:
+               chain: ChainConfig, cache_dir: Path, baseline: np.ndarray, rows: np.ndarray,
+               candidate: np.ndarray | None = None, n_boot: int = 2000, seed: int = 0) -> dict:
     """A case's truth-side columns: its radar signature and the world's change on the simulator
     (:func:`effect_reference` on ``rows`` of the case, whose baseline simulator spectrograms are
-    ``baseline``: the diagnosis's evaluation rows; radar-side effects only).
+    ``baseline`` and the true effect's candidate's ``candidate``: the diagnosis's evaluation rows;
+    radar-side effects only).
 
     Row by row over the case's own windows: an effect that changes the radar data can move a row's
     window (chosen from the radar data, as ingest does), and rows over other stretches of the motion
@@ -209,7 +218,8 @@ def truth_side(build_world: Callable[..., Path], clean_cfg: Mapping, path: Path,
     out = {**radar_signature(path, clean), "windows_moved": int(moved.sum())}
     if out["signature_mean"] > 0:  # skeleton-side effects leave the radar data untouched: no change to add
         measured, effect_free = (x[torch.as_tensor(rows)] for x in _paired(path, clean))
-        out.update(effect_reference(measured, effect_free, torch.as_tensor(baseline, dtype=torch.float32),
+        cand = None if candidate is None else torch.as_tensor(candidate, dtype=torch.float32)
+        out.update(effect_reference(measured, effect_free, torch.as_tensor(baseline, dtype=torch.float32), cand,
                                     n_boot=n_boot, seed=seed))
     return out
 
@@ -270,7 +280,9 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              "data at all. `world's change on the simulator` is the gap_closed [95 % CI] of the diagnosis's baseline "
              "simulator (its evaluation rows) plus, row by row, exactly that change (handradar.gap.benchmark.effect_reference; - where the "
              "effect leaves the radar data unchanged): what a candidate reproducing the effect would close on top of "
-             "the simulator's generic mismatch, the reference for the true effect's gap_closed.", "",
+             "the simulator's generic mismatch, the reference for the true effect's gap_closed; r: the Pearson "
+             "correlation, over every pixel, of the true effect's candidate's change with the world's (does the "
+             "candidate change the spectrograms the way the effect does?).", "",
              "| world | truth | attributed cause | correct | gap_closed of the true effect [95 % CI] | rank | "
              "top candidate (gap_closed) | runner-up lead CI | after: effects (gap_closed) | baseline SSIM | "
              "radar signature | world's change on the simulator |",
@@ -281,7 +293,8 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
         sig = ("-" if r.get("signature_mean") is None
                else f"{fmt_number(r['signature_mean'])} / {fmt_number(r['signature_median'])}")
         ref = ("-" if r.get("reference_gap_closed") is None else
-               f"{sgn(r['reference_gap_closed'])} [{sgn(r['reference_ci95'][0])}, {sgn(r['reference_ci95'][1])}]")
+               f"{sgn(r['reference_gap_closed'])} [{sgn(r['reference_ci95'][0])}, {sgn(r['reference_ci95'][1])}]"
+               + ("" if r.get("change_correlation") is None else f"; r {fmt_number(r['change_correlation'])}"))
         lead = "-" if not r.get("lead_ci95") else f"[{sgn(r['lead_ci95'][0])}, {sgn(r['lead_ci95'][1])}] vs {r['runner_up']}"
         lines.append(f"| {r['case']} | {r['truth']} | {_attributed(r)} | {'yes' if r['correct'] else 'no'} | {true} | "
                      f"{r['true_rank'] or '-'} | {r['top_candidate']} ({sgn(r['top_gap_closed'])}) | {lead} | "
@@ -340,6 +353,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             res = {**_case_result(case, diagnosis.report, time.perf_counter() - t0, len(data)),
                    **truth_side(build_world, clean_cfg, path, clean, radar=radar, chain=chain, cache_dir=world_cache,
                                 baseline=diagnosis.baseline, rows=diagnosis.evaluation,
+                                candidate=diagnosis.candidates.get(case.truth),
                                 n_boot=int(diag_cfg.get("n_boot", 2000)), seed=seed)}
             res["seconds"] = time.perf_counter() - t0
             atomic_write_text(done, json.dumps(res, indent=1) + "\n")
