@@ -226,7 +226,7 @@ def dataset_path(world: Any, radar: RadarConfig, chain: ChainConfig, cache_dir: 
     return Path(cache_dir) / f"world_{h}.h5", h
 
 
-def window_start_frames(window_starts_s: Sequence[float], radar: RadarConfig, n_rows: int) -> list[int]:
+def _window_start_frames(window_starts_s: Sequence[float], radar: RadarConfig, n_rows: int) -> list[int]:
     """Window start times (s, a dataset's ``window_start_s``, row by row) -> radar frame indices."""
     if len(window_starts_s) != n_rows:
         raise ValueError(f"{len(window_starts_s)} window starts given for a world of {n_rows} recordings")
@@ -250,7 +250,7 @@ def build_world_dataset(world_cfg: Any, radar: RadarConfig, chain: ChainConfig, 
     world = world_config(world_cfg)
     cap = capture_radar(radar, world)
     specs = recording_specs(world)
-    starts = None if window_starts_s is None else window_start_frames(window_starts_s, cap, len(specs))
+    starts = None if window_starts_s is None else _window_start_frames(window_starts_s, cap, len(specs))
     path, h = dataset_path(world, radar, chain, cache_dir, starts)
     if path.is_file():
         return path
