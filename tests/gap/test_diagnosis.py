@@ -167,6 +167,30 @@ def test_baseline_calibration_recovers_a_doppler_spread(radar, short_chain, tmp_
         DiagnosisConfig.from_mapping({"doppler_spreads": [-1.0]})
 
 
+def test_baseline_calibration_recovers_a_metacarpal_gain(radar, short_chain, tmp_path):
+    # "measured" = the paper's simulator with the four finger metacarpals at half amplitude (as if the
+    # palm's flesh half buried them); step 0 finds the factor on the joint (exponent, gain) grid. The
+    # hands also move to and from the radar: a still palm is static clutter, which the chain removes
+    rs, labels, meta = rows(radar, short_chain, 12, seed=5)
+    rs.skeletons = (rs.skeletons + 0.04 * np.sin(2 * np.pi * 3.0 * rs.times)[None, :, None, None, None]
+                    * np.array([0.0, 0.0, 1.0])).astype(np.float32)
+    with torch.no_grad():
+        measured = Simulator(radar, short_chain, metacarpal_gain=0.5)(
+            torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks), times=torch.as_tensor(rs.times)).numpy()
+    data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
+    rep = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5], metacarpal_gains=[1.0, 0.5, 0.0]).report
+    validate_report(rep, n_columns=short_chain.n_columns)
+    cal = rep["baseline"]["calibration"]
+    assert (cal["rcs_exponent"], cal["metacarpal_gain"]) == (1.0, 0.5) and len(cal["grid"]) == 6
+    scores = {(g["rcs_exponent"], g["metacarpal_gain"]): g["ssim"] for g in cal["grid"]}
+    assert scores[1.0, 0.5] == pytest.approx(1.0, abs=1e-4) and max(v for k, v in scores.items() if k != (1.0, 0.5)) < 0.999
+    assert fitted_simulator(rep)["metacarpal_gain"] == 0.5
+    text = render(rep, {}, tmp_path)
+    assert "and the metacarpals' amplitude to 0.5" in text and "(1, 1) = the paper's model" in text
+    with pytest.raises(ValueError, match="metacarpal_gains"):
+        DiagnosisConfig.from_mapping({"metacarpal_gains": [1.5]})
+
+
 def test_step_0_fits_the_baselines_noise_and_compares_its_expected_spectrogram(radar, short_chain, tmp_path):
     # "measured" = one noise draw at 5 dB (like a measurement); the baseline's noise sits at its default 20 dB
     data = gap_data(radar, short_chain, 12, {"noise": {"snr_db": 5.0}}, seed=3)

@@ -9,13 +9,18 @@ import pytest
 import torch
 
 from handradar.hand.retarget import standard_hand
-from handradar.hand.skeleton import BONE_CHILD, BONE_PARENT
+from handradar.hand.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
 from handradar.radar.chain import range_profiles_from_adc, spectrogram_from_profiles
 from handradar.radar.signal import beat_signal
 from handradar.sim.cache import pack
 from handradar.sim.interp import interpolate_time, upsample_to_chirps
 from handradar.sim.profiles import combine_slots, scatterer_profiles, window_chirp_times
-from handradar.sim.scatterers import Scatterers, bone_scatterers, radar_amplitude
+from handradar.sim.scatterers import (
+    METACARPAL_SLOTS,
+    Scatterers,
+    bone_scatterers,
+    radar_amplitude,
+)
 from handradar.sim.simulator import Simulator
 from tests.sim.demo import window
 
@@ -306,6 +311,22 @@ def test_doppler_spread_adds_its_variance_and_keeps_the_power():
     wrapped = spread_doppler(delta, 2.0)[0, :, 0]
     torch.testing.assert_close(wrapped[1:4], wrapped.flip(0)[:3])  # symmetric about row 0 across the wrap
     assert spread_doppler(line, 0.0) is line
+
+
+def test_metacarpal_gain_scales_the_metacarpals_only_and_is_validated_and_keyed(radar, short_chain):
+    with pytest.raises(ValueError, match="metacarpal_gain"):
+        Simulator(radar, short_chain, metacarpal_gain=1.5)
+    assert "metacarpal_gain" not in Simulator(radar, short_chain).key()
+    assert Simulator(radar, short_chain, metacarpal_gain=0.25).key()["metacarpal_gain"] == 0.25
+    t = np.arange(int(round(short_chain.frames_per_window(radar) * radar.frame_period_s * 100))) / 100
+    pos, mask = window(t, hands=2, seed=3)
+    sk, mk = torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
+    base, half = (Simulator(radar, short_chain, metacarpal_gain=g) for g in (1.0, 0.5))
+    a, b = (s.scatterers(s.context(sk, mk)) for s in (base, half))
+    meta = torch.isin(a.owner, torch.as_tensor(METACARPAL_SLOTS))
+    assert [BONE_NAMES[int(k) % 19] for k in METACARPAL_SLOTS[:4]] == [f"{f}_metacarpal" for f in ("index", "middle", "ring", "pinky")]
+    torch.testing.assert_close(b.gain[..., meta], 0.5 * a.gain[..., meta])
+    torch.testing.assert_close(b.gain[..., ~meta], a.gain[..., ~meta])
 
 
 def test_simulator_doppler_spread_is_validated_keyed_and_widens_a_moving_hand(radar, short_chain):

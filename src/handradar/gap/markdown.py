@@ -11,9 +11,10 @@ def _params(p: dict) -> str:
     return ", ".join(f"{k}={v:.4g}" for k, v in p.items()) or "-"
 
 
-# step 0's generic settings beside the exponent: (grid axis name, the fitted value as a clause)
-_GENERIC_TEXT = {"bone_extent": ("extent", "the bones' extent to {:g} of their length"),
-                 "doppler_spread": ("spread", "a Doppler spread of {:g} rows")}
+# step 0's generic settings beside the exponent: (grid axis name, the fitted value as a clause, the paper's value)
+_GENERIC_TEXT = {"bone_extent": ("extent", "the bones' extent to {:g} of their length", 0),
+                 "doppler_spread": ("spread", "a Doppler spread of {:g} rows", 0),
+                 "metacarpal_gain": ("metacarpal", "the metacarpals' amplitude to {:g}", 1)}
 
 
 def _calibration(cal: dict | None) -> str:
@@ -32,7 +33,8 @@ def _calibration(cal: dict | None) -> str:
         tried = ", ".join(f"{point(g)}: {fmt_number(g['ssim'])}" for g in cal["grid"])
         fitted = "".join(f" and {_GENERIC_TEXT[k][1].format(cal[k])}" for k in extra)
         axes = f"({', '.join(['exponent'] + [_GENERIC_TEXT[k][0] for k in extra])})" if extra else "exponent"
-        paper = f"({', '.join(['1'] + ['0'] * len(extra))}) = the paper's model" if extra else "1 = the paper's RCS"
+        paper = (f"({', '.join(['1'] + [str(_GENERIC_TEXT[k][2]) for k in extra])}) = the paper's model" if extra
+                 else "1 = the paper's RCS")
         text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g}{fitted} on the "
                 f"calibration rows (mean SSIM there by {axes}: {tried}; {paper})")
     if cal.get("effects"):

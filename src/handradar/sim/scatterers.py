@@ -40,10 +40,13 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from handradar.hand.skeleton import BONE_CHILD, BONE_PARENT, N_BONES
+from handradar.hand.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT, N_BONES
 from handradar.sim.rcs import cos_angle, cylinder_rcs_m2
 
 N_SLOTS = 2 * N_BONES  # weighted reflection points: 19 bones x 2 hands
+# the slots (hand * 19 + bone) of the four finger metacarpals of both hands: wrist-to-knuckle bones
+# that a real hand buries in the palm's flesh
+METACARPAL_SLOTS = tuple(h * N_BONES + b for h in (0, 1) for b, name in enumerate(BONE_NAMES) if name.endswith("metacarpal"))
 
 
 @dataclass

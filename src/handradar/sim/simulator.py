@@ -25,13 +25,16 @@ Public API:
 
     Simulator(radar, chain, *, hand=HandModelConfig(), effects=(), effect_params=None,
               skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5,
-              rcs_exponent=1.0, bone_extent=0.0, doppler_spread=0.0, compile_combine=False)
+              rcs_exponent=1.0, bone_extent=0.0, doppler_spread=0.0, metacarpal_gain=1.0, compile_combine=False)
       rcs_exponent: aspect exponent of every cylinder's RCS (handradar.sim.rcs; 1 = the paper's)
       bone_extent: fraction of each bone's length its reflection is spread over (handradar.sim.scatterers;
             0 = the paper's single centre at the midpoint)
       doppler_spread: std, in Doppler rows, of a Gaussian the power is spread by along Doppler before dB
             (spread_doppler; 0 = none): a generic broadening of every line (micro-motion, extended
             scatterers) that the diagnosis's step 0 can fit
+      metacarpal_gain: amplitude factor of the four finger metacarpals' reflection points (1 = the
+            paper's cylinders; 0 = none, as if the palm's flesh buried them): a generic knob of
+            step 0, since wrist-to-knuckle cylinders are the hand model's crudest part
       compile_combine: torch.compile the weighted sum (see profiles.combine_slots)
       .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
       .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
@@ -70,7 +73,12 @@ from handradar.sim import effects as _effects  # noqa: F401  (registers the eigh
 from handradar.sim.effects.base import Effect, SimContext, build_effects
 from handradar.sim.interp import upsample_to_chirps
 from handradar.sim.profiles import combine_slots, scatterer_profiles, window_chirp_times
-from handradar.sim.scatterers import N_SLOTS, Scatterers, bone_scatterers
+from handradar.sim.scatterers import (
+    METACARPAL_SLOTS,
+    N_SLOTS,
+    Scatterers,
+    bone_scatterers,
+)
 
 
 def hold_untracked(positions: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
@@ -111,7 +119,7 @@ class Simulator(nn.Module):
                  effects: list | tuple = (), effect_params: dict | None = None, skeleton_rate_hz: float = 100.0,
                  tx_power_w: float = 0.0158, gain_tx_dbi: float = 10.5, gain_rx_dbi: float = 10.5,
                  rcs_exponent: float = 1.0, bone_extent: float = 0.0, doppler_spread: float = 0.0,
-                 compile_combine: bool = False) -> None:
+                 metacarpal_gain: float = 1.0, compile_combine: bool = False) -> None:
         super().__init__()
         self.radar, self.chain = radar, chain
         self.hand = hand if isinstance(hand, HandModelConfig) else HandModelConfig(**dict(hand or {}))
@@ -127,6 +135,9 @@ class Simulator(nn.Module):
         self.doppler_spread = float(doppler_spread)
         if not 0.0 <= self.doppler_spread <= chain.stft_len:
             raise ValueError(f"doppler_spread must be in [0, {chain.stft_len}] Doppler rows (0: none), found {doppler_spread}")
+        self.metacarpal_gain = float(metacarpal_gain)
+        if not 0.0 <= self.metacarpal_gain <= 1.0:
+            raise ValueError(f"metacarpal_gain must be in [0, 1] (1: the paper's cylinders), found {metacarpal_gain}")
         self.effects = nn.ModuleList(build_effects(list(effects), dict(effect_params or {})))
         self.register_buffer("chirp_times", torch.as_tensor(window_chirp_times(radar, chain), dtype=torch.float64),
                              persistent=False)
@@ -141,6 +152,7 @@ class Simulator(nn.Module):
                 "amplitude": (self.tx_power_w, self.gain_tx_dbi, self.gain_rx_dbi), "rcs_exponent": self.rcs_exponent,
                 **({"bone_extent": self.bone_extent} if self.bone_extent else {}),
                 **({"doppler_spread": self.doppler_spread} if self.doppler_spread else {}),
+                **({"metacarpal_gain": self.metacarpal_gain} if self.metacarpal_gain != 1.0 else {}),
                 "effects": [(e.name, e.values(), e.settings()) for e in self.effects]}
 
     def effect(self, name: str) -> Effect:
@@ -191,6 +203,9 @@ class Simulator(nn.Module):
         """The reflection points of a context: the bones', then the scatterer-stage effects."""
         scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii, self.rcs_exponent,
                                self.bone_extent)
+        if self.metacarpal_gain != 1.0:
+            meta = torch.isin(scat.owner, torch.as_tensor(METACARPAL_SLOTS, device=scat.owner.device))
+            scat = scat.scaled(torch.where(meta, self.metacarpal_gain, 1.0).to(scat.gain.dtype))
         for e in self._stage("scatterers"):
             scat = e.apply_scatterers(scat, ctx)
         return scat
