@@ -28,26 +28,26 @@ import argparse
 import time
 from pathlib import Path
 
-import h5py
 import numpy as np
-import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import get_method, instantiate
 from omegaconf import OmegaConf
 
 from handradar.config import VERSION_BASE, config_dir
-from handradar.gap.benchmark import CONTROL_NOTHING, Case, case_world, cases, truth_side
+from handradar.gap.benchmark import (
+    CONTROL_NOTHING,
+    Case,
+    case_world,
+    cases,
+    spectrograms,
+    truth_side,
+)
 from handradar.gap.data import load_dataset
 from handradar.gap.engine import VariantEngine
 from handradar.gap.fit import GENERIC_SETTINGS, calibrate_settings, generic_grid
 from handradar.metrics import per_example_ssim
 from handradar.sim.factory import SimFactory
 from handradar.vocab import EFFECTS
-
-
-def _spectrograms(path: Path) -> torch.Tensor:
-    with h5py.File(path, "r") as f:
-        return torch.from_numpy(f["spectrograms"][()].astype(np.float32))
 
 
 def calibrated_baseline(sim_cfg, diag: dict, path: Path, effect: str) -> tuple[np.ndarray, np.ndarray | None]:
@@ -91,7 +91,7 @@ def main() -> None:
         baseline, candidate = calibrated_baseline(cfg.sim, diag, path, case.truth)
         res = truth_side(build_world, clean_cfg, path, clean, radar=radar, chain=chain, cache_dir=cache,
                          baseline=baseline, rows=np.arange(len(baseline)), candidate=candidate)
-        own = 1.0 - np.asarray(per_example_ssim(_spectrograms(clean), _spectrograms(path)))
+        own = 1.0 - np.asarray(per_example_ssim(spectrograms(clean), spectrograms(path)))
         ref = ("-" if "reference_gap_closed" not in res else
                f"{res['reference_gap_closed']:+.3f} [{res['reference_ci95'][0]:+.3f}, {res['reference_ci95'][1]:+.3f}]")
         print(f"| {case.name} | {len(own)} | {res['windows_moved']} | {res['signature_mean']:.4f} / "

@@ -31,6 +31,14 @@ from tests.gap.conftest import builder, gap_data, rows, simulate
 CANDIDATES = ["antenna_pattern", "palm", "noise", "multipath"]
 
 
+def simulated(radar, chain, rs, **settings) -> np.ndarray:
+    """The rows' spectrograms from the paper's simulator with other settings: "measured" data whose
+    generic mismatch step 0 should recover."""
+    with torch.no_grad():
+        return Simulator(radar, chain, **settings)(torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks),
+                                                   times=torch.as_tensor(rs.times)).numpy()
+
+
 def run(radar, chain, data, **kw):
     cfg = DiagnosisConfig(candidates=CANDIDATES, radarweightnet=False, n_boot=500, refine_rows=4, **kw)
     return diagnose(data, builder(radar, chain), {}, cfg, progress=False)
@@ -105,9 +113,7 @@ def test_split_is_seeded_stratified_and_disjoint():
 def test_baseline_calibration_recovers_the_rcs_exponent(radar, short_chain):
     # "measured" = the paper's simulator with a less specular cylinder RCS (aspect exponent 0.5)
     rs, labels, meta = rows(radar, short_chain, 12, seed=4)
-    with torch.no_grad():
-        measured = Simulator(radar, short_chain, rcs_exponent=0.5)(
-            torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks), times=torch.as_tensor(rs.times)).numpy()
+    measured = simulated(radar, short_chain, rs, rcs_exponent=0.5)
     data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
     uncalibrated = run(radar, short_chain, data, rcs_exponents=[1.0]).report
     assert uncalibrated["baseline"]["ssim"] < 0.99 and uncalibrated["baseline"]["calibration"]["grid"] == []
@@ -125,9 +131,7 @@ def test_baseline_calibration_recovers_the_bones_extent_jointly_with_the_exponen
     # "measured" = the paper's simulator with each bone's reflection spread over its whole length and a
     # less specular RCS: a mismatch of the scatterer model itself, which step 0 absorbs before candidates
     rs, labels, meta = rows(radar, short_chain, 12, seed=5)
-    with torch.no_grad():
-        measured = Simulator(radar, short_chain, rcs_exponent=0.5, bone_extent=1.0)(
-            torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks), times=torch.as_tensor(rs.times)).numpy()
+    measured = simulated(radar, short_chain, rs, rcs_exponent=0.5, bone_extent=1.0)
     data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
     exponent_only = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5]).report
     assert "bone_extent" not in exponent_only["baseline"]["calibration"] and exponent_only["baseline"]["ssim"] < 0.99
@@ -148,9 +152,7 @@ def test_baseline_calibration_recovers_a_doppler_spread(radar, short_chain, tmp_
     # "measured" = the paper's simulator with every Doppler line spread by a Gaussian of 2 rows (a generic
     # broadening: micro-motion, extended scatterers); step 0 finds it on the joint (exponent, spread) grid
     rs, labels, meta = rows(radar, short_chain, 12, seed=5)
-    with torch.no_grad():
-        measured = Simulator(radar, short_chain, doppler_spread=2.0)(
-            torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks), times=torch.as_tensor(rs.times)).numpy()
+    measured = simulated(radar, short_chain, rs, doppler_spread=2.0)
     data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
     rep = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5], doppler_spreads=[0.0, 1.0, 2.0, 4.0]).report
     validate_report(rep, n_columns=short_chain.n_columns)
@@ -174,9 +176,7 @@ def test_baseline_calibration_recovers_a_metacarpal_gain(radar, short_chain, tmp
     rs, labels, meta = rows(radar, short_chain, 12, seed=5)
     rs.skeletons = (rs.skeletons + 0.04 * np.sin(2 * np.pi * 3.0 * rs.times)[None, :, None, None, None]
                     * np.array([0.0, 0.0, 1.0])).astype(np.float32)
-    with torch.no_grad():
-        measured = Simulator(radar, short_chain, metacarpal_gain=0.5)(
-            torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks), times=torch.as_tensor(rs.times)).numpy()
+    measured = simulated(radar, short_chain, rs, metacarpal_gain=0.5)
     data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
     rep = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5], metacarpal_gains=[1.0, 0.5, 0.0]).report
     validate_report(rep, n_columns=short_chain.n_columns)

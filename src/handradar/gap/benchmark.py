@@ -27,7 +27,7 @@ Public API:
 
     Case(name, world_effects_on, truth);  cases(names) -> list[Case]
     case_world(world_overrides, case, strengths=None) -> dict   (world config of one case)
-    window_starts(path) -> np.ndarray                 (a dataset's window start per row, s)
+    spectrograms(path) -> torch.Tensor;  window_starts(path) -> np.ndarray   (a dataset's rows; window starts, s)
     radar_signature(case_path, clean_path) -> dict    (truth side: how much the effect changes the radar data)
     effect_reference(measured, clean, baseline) -> dict   (truth side: the world's change added to the
                                                        simulator's baseline spectrograms)
@@ -132,7 +132,8 @@ def score(results: Sequence[Mapping]) -> dict:
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
-def _spectrograms(path: str | Path) -> torch.Tensor:
+def spectrograms(path: str | Path) -> torch.Tensor:
+    """(N, doppler, columns) float32: a dataset's spectrograms."""
     with h5py.File(path, "r") as f:
         return torch.from_numpy(f["spectrograms"][()].astype(np.float32))
 
@@ -146,7 +147,7 @@ def window_starts(path: str | Path) -> np.ndarray:
 def _paired(*paths: str | Path) -> list:
     """The spectrograms of datasets whose rows pair up: same shape, and every row over the same window
     of its recording."""
-    specs = [_spectrograms(p) for p in paths]
+    specs = [spectrograms(p) for p in paths]
     if len({tuple(s.shape) for s in specs}) != 1:
         raise ValueError(f"{', '.join(map(str, paths))}: spectrogram shapes differ {[tuple(s.shape) for s in specs]}")
     if not all(np.allclose(window_starts(paths[0]), window_starts(p)) for p in paths[1:]):
@@ -163,8 +164,11 @@ def radar_signature(case_path: str | Path, clean_path: str | Path) -> dict:
     the diagnosis never sees it. Effects on the skeleton side (tracking_jitter, sync_offset) leave the
     radar data unchanged and show 0 here.
     """
-    x, y = _paired(case_path, clean_path)
-    d = 1.0 - per_example_ssim(y, x)
+    return _signature(*_paired(case_path, clean_path))
+
+
+def _signature(case: torch.Tensor, clean: torch.Tensor) -> dict:
+    d = 1.0 - per_example_ssim(clean, case)
     return {"signature_mean": float(np.mean(d)), "signature_median": float(np.median(d))}
 
 
@@ -215,9 +219,10 @@ def truth_side(build_world: Callable[..., Path], clean_cfg: Mapping, path: Path,
     moved = ~np.isclose(window_starts(clean), starts)
     if moved.any():
         clean = build_world(clean_cfg, radar, chain, cache_dir, window_starts_s=starts.tolist())
-    out = {**radar_signature(path, clean), "windows_moved": int(moved.sum())}
+    case_spec, clean_spec = _paired(path, clean)
+    out = {**_signature(case_spec, clean_spec), "windows_moved": int(moved.sum())}
     if out["signature_mean"] > 0:  # skeleton-side effects leave the radar data untouched: no change to add
-        measured, effect_free = (x[torch.as_tensor(rows)] for x in _paired(path, clean))
+        measured, effect_free = case_spec[torch.as_tensor(rows)], clean_spec[torch.as_tensor(rows)]
         cand = None if candidate is None else torch.as_tensor(candidate, dtype=torch.float32)
         out.update(effect_reference(measured, effect_free, torch.as_tensor(baseline, dtype=torch.float32), cand,
                                     n_boot=n_boot, seed=seed))
