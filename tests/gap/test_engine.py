@@ -7,8 +7,10 @@ import pytest
 import torch
 
 from handradar.gap.engine import VariantEngine, constant_ratio, merge, slot_weights
+from handradar.gap.fit import calibrate_settings, generic_grid
+from handradar.metrics import per_example_ssim
 from handradar.sim.scatterers import Scatterers
-from tests.gap.conftest import builder, rows
+from tests.gap.conftest import builder, rows, simulate
 
 VARIANTS = [{}, {"noise": {"snr_db": 10.0}}, {"palm": {"radius_m": 0.03}},
             {"forearm": {"length_m": 0.1, "radius_m": 0.02}}, {"forearm": {"length_m": 0.1, "radius_m": 0.04}},
@@ -52,3 +54,43 @@ def test_constant_ratio_and_slot_weights():
     assert slot_weights(s0, split_slot) is None  # two points of slot 0 change differently
     free = Scatterers(pos, pos, torch.ones(1, 2, 3), torch.tensor([[[1.0, 1.0, 2.0], [1.0, 1.0, 2.0]]]), s0.owner)
     assert slot_weights(s0, free) is None  # an unweighted point changes: no weight reaches it
+
+
+def test_variant_factories_share_the_base_where_their_settings_allow(radar, short_chain):
+    """A variant with its own generic settings: a Doppler spread re-uses the base's signal, a metacarpal
+    gain re-weights its slot profiles, an RCS exponent (read by the effects from the context) is
+    simulated in full; each gives the simulator's own spectrogram, also across a tracking dropout
+    inside the window (the points reflect nothing there; the weights are interpolated in between)."""
+    rs, _, _ = rows(radar, short_chain, 2, seed=1)
+    rs.masks[:, 20:23] = False
+    build = builder(radar, short_chain)
+    base = {"forearm": {"length_m": 0.1}}
+    settings = [{"doppler_spread": 2.0}, {"metacarpal_gain": 0.5}, {"metacarpal_gain": 0.0},
+                {"rcs_exponent": 0.5}, {"bone_extent": 1.0}]
+    engine = VariantEngine(build, base, rs, batch_size=2)
+    factories = [build.replace(**s) for s in settings]
+    out = engine.spectrograms([{}] * len(settings), factories=factories)
+    assert engine.paths == {("settings", "signal"): 1, ("settings", "reweighted"): 2, ("settings", "full"): 2}
+    for s, f, spec in zip(settings, factories, out):
+        with torch.no_grad():
+            ref = f(base)(torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks),
+                          times=torch.as_tensor(rs.times)).numpy()
+        np.testing.assert_allclose(spec, ref, atol=1e-4, err_msg=str(s))
+    with pytest.raises(ValueError, match="2 factories for 1 variants"):
+        engine.spectrograms([{}], factories=factories[:2])
+
+
+def test_step_0_scores_every_grid_point_as_its_own_simulator_would(radar, short_chain):
+    """calibrate_settings shares one pass per RCS exponent between the points of its grid: each point's
+    score is still the mean SSIM of that point's own simulator against the rows."""
+    rs, _, _ = rows(radar, short_chain, 4, seed=2)
+    build = builder(radar, short_chain)
+    measured = simulate(radar, short_chain, rs, {})
+    grid = generic_grid({"rcs_exponents": [1.0, 0.25], "metacarpal_gains": [1.0, 0.5], "doppler_spreads": [0.0, 1.0]})
+    best, scores = calibrate_settings(build, {}, rs, np.arange(4), measured, grid, batch_size=4)
+    assert best == {"rcs_exponent": 1.0, "doppler_spread": 0.0, "metacarpal_gain": 1.0} and len(scores) == 8
+    for point, score in zip(grid, scores):
+        with torch.no_grad():
+            spec = build.replace(**point)()(torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks),
+                                           times=torch.as_tensor(rs.times))
+        assert score == pytest.approx(float(per_example_ssim(torch.as_tensor(measured), spec).mean()), abs=1e-5)

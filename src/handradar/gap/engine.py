@@ -19,6 +19,13 @@ computed once; then each variant takes the cheapest path that gives its signal:
   linearly and this path interpolates both linearly, a second-order difference (tests bound it).
 - anything else (skeleton-stage effects, points that move): the variant's full simulation.
 
+A variant may also come with its own factory (``factories``), whose generic settings differ from
+the base's (step 0's grid, handradar.gap.fit.calibrate_settings). A setting of the signal's last
+step (``doppler_spread``) keeps the shortcuts above; one that changes the reflection points only
+(``metacarpal_gain``, ``bone_extent``) takes the scatterer-stage path, whose checks find the
+re-weighting (the metacarpals' amplitude) or fall back to the full simulation (points that move);
+any other (``rcs_exponent``, which the effects read from the context) takes the full simulation.
+
 Reflection points with zero gain in a whole batch (an untracked hand) are skipped, and rows that
 track the same hands are batched together, so one-hand rows cost about half.
 
@@ -28,7 +35,7 @@ Public API:
         .take(idx) -> RowSet
     build: a handradar.sim.factory.SimFactory, build(effects {name: {param: value}}) -> Simulator
     VariantEngine(build, base, rows, batch_size=8)
-        .spectrograms(variants, idx=None, progress=None) -> (V, n, doppler, columns) float32
+        .spectrograms(variants, idx=None, progress=None, factories=None) -> (V, n, doppler, columns) float32
         .signals(variant, idx, grad=False) -> iterator of (batch idx, spectrograms) (differentiable)
 """
 
@@ -73,6 +80,22 @@ def merge(base: Variant, added: Variant) -> dict[str, dict[str, float]]:
     for k, v in added.items():
         out[k] = {**out.get(k, {}), **dict(v)}
     return out
+
+
+# Simulator settings (Simulator.key()) that a variant's factory may change and still share the base's
+# work: applied after the summed signal, or to the reflection points only (module doc)
+SIGNAL_SETTINGS = frozenset({"doppler_spread"})
+SCATTERER_SETTINGS = frozenset({"metacarpal_gain", "bone_extent"})
+
+
+def settings_path(sim: Simulator, base: Simulator) -> str:
+    """The cheapest path that the settings of ``sim`` (effects aside) allow from ``base``'s work:
+    "signal", "scatterers" or "full" (module doc)."""
+    k0, k1 = base.key(), sim.key()
+    differ = {k for k in (set(k0) | set(k1)) - {"effects"} if k0.get(k) != k1.get(k)}
+    if differ <= SIGNAL_SETTINGS:
+        return "signal"
+    return "scatterers" if differ <= SIGNAL_SETTINGS | SCATTERER_SETTINGS else "full"
 
 
 def _same(a: torch.Tensor, b: torch.Tensor) -> bool:
@@ -153,7 +176,11 @@ def slot_weights(base: Scatterers, new: Scatterers, rtol: float = 1e-6) -> torch
     nz = g0 != 0
     if bool((g1[~nz] != 0).any()):
         return None
-    ratio = torch.where(nz, g1 / torch.where(nz, g0, torch.ones_like(g0)), torch.ones_like(g0))
+    ratio = torch.where(nz, g1 / torch.where(nz, g0, torch.ones_like(g0)), torch.full_like(g0, torch.nan))
+    # a step where a point reflects nothing (its hand untracked) takes the point's mean ratio over the
+    # others, not 1: the weights are interpolated between steps, so a factor constant in time (the
+    # metacarpals' amplitude) stays exact where a hand (un)tracks inside the window
+    ratio = torch.where(nz, ratio, torch.nan_to_num(ratio.nanmean(1, keepdim=True), nan=1.0))
     b, t = ratio.shape[:2]
     owner = base.owner
     free = owner < 0
@@ -252,18 +279,19 @@ class VariantEngine:
         return (torch.as_tensor(r.skeletons[rows]), torch.as_tensor(r.masks[rows]),
                 torch.as_tensor(r.times, dtype=torch.float64), vis)
 
-    def _path(self, added: Variant) -> str:
+    def _path(self, sim: Simulator, added: Variant) -> str:
         stages = {REGISTRY[name].stage for name in added}
-        if "skeleton" in stages:
+        by_settings = "signal" if sim is self.base_sim else settings_path(sim, self.base_sim)
+        if "skeleton" in stages or by_settings == "full":
             return "full"
-        return "scatterers" if "scatterers" in stages else "signal"
+        return "scatterers" if "scatterers" in stages or by_settings == "scatterers" else "signal"
 
     def _signal(self, sim: Simulator, added: Variant, inputs, base, store: _Appended | None) -> torch.Tensor:
         """Summed signal of one variant on one batch (before its signal stage)."""
         sk, m, t, vis = inputs
         ctx, s0, p0, sum0 = base
-        path = self._path(added)
-        key = ",".join(sorted(added))
+        path = self._path(sim, added)
+        key = ",".join(sorted(added)) or "settings"
         if path == "signal":
             self.paths[key, "signal"] += 1
             return sum0
@@ -295,15 +323,20 @@ class VariantEngine:
     @torch.no_grad()
     def spectrograms(self, variants: Sequence[Variant], idx: np.ndarray | None = None,
                      progress: Callable[[int], None] | None = None,
-                     on_base: Callable[[np.ndarray, torch.Tensor], None] | None = None) -> np.ndarray:
+                     on_base: Callable[[np.ndarray, torch.Tensor], None] | None = None,
+                     factories: Sequence[SimFactory] | None = None) -> np.ndarray:
         """Spectrograms (V, n, doppler, columns) of every variant (effects added to the base) on rows ``idx``.
 
         progress(n_rows) is called after each batch. Stochastic effects (noise) start from their
         seed in every call, so variants and repeated calls see the same draws (common random numbers).
         on_base(rows, base slot profiles) sees each batch's base profiles (per-bone decomposition).
+        factories: each variant's factory (default: the engine's), e.g. other generic settings.
         """
         idx = np.arange(len(self.rows)) if idx is None else np.asarray(idx, dtype=np.int64)
-        sims = [self.build(merge(self.base, v)) for v in variants]
+        if factories is not None and len(factories) != len(variants):
+            raise ValueError(f"{len(factories)} factories for {len(variants)} variants")
+        sims = [(self.build if factories is None else factories[j])(merge(self.base, v))
+                for j, v in enumerate(variants)]
         out: np.ndarray | None = None
         for pos, rows in self._batches(idx):
             inputs = self._inputs(rows)

@@ -99,13 +99,23 @@ def calibrate_settings(build: SimFactory, base: Mapping, rows: RowSet, idx: np.n
                        progress: Callable[[int], None] | None = None) -> tuple[dict[str, float], list[float]]:
     """The generic simulator settings (of ``grid``: e.g. ``{"rcs_exponent": 0.5, "bone_extent": 1.0}``
     per point) under which the baseline simulator scores the highest mean SSIM on rows ``idx``, and the
-    score of each point (ties: the first)."""
+    score of each point (ties: the first).
+
+    One pass over the rows per RCS exponent: the points that share it are variants of one engine,
+    so a metacarpal gain re-weights that pass's slot profiles and a Doppler spread re-uses its signal
+    (handradar.gap.engine, ``factories``) instead of simulating again."""
     target = torch.as_tensor(measured[idx])
-    scores = []
-    for point in grid:
-        engine = VariantEngine(build.replace(**{k: float(v) for k, v in point.items()}), base, rows,
-                               batch_size=batch_size)
-        scores.append(_mean_ssim(target, engine.spectrograms([{}], idx, progress=progress)[0]))
+    scores = [float("nan")] * len(grid)
+    by_exponent: dict[float, list[int]] = {}
+    for j, point in enumerate(grid):
+        by_exponent.setdefault(float(point.get("rcs_exponent", build.rcs_exponent)), []).append(j)
+    for exponent, js in by_exponent.items():
+        engine = VariantEngine(build.replace(rcs_exponent=exponent), base, rows, batch_size=batch_size)
+        factories = [build.replace(**{k: float(v) for k, v in grid[j].items()}) for j in js]
+        specs = engine.spectrograms([{}] * len(js), idx, factories=factories,
+                                    progress=None if progress is None else lambda n, k=len(js): progress(n * k))
+        for j, spec in zip(js, specs):
+            scores[j] = _mean_ssim(target, spec)
     return {k: float(v) for k, v in grid[int(np.argmax(scores))].items()}, scores
 
 
