@@ -12,6 +12,8 @@ from omegaconf import OmegaConf
 
 from handradar.data.hdf5 import open_writer
 from handradar.gap.benchmark import (
+    CONTROL_NOTHING,
+    Case,
     case_world,
     cases,
     effect_reference,
@@ -20,7 +22,9 @@ from handradar.gap.benchmark import (
     run_benchmark,
     score,
     split_text,
+    window_starts,
 )
+from handradar.sim.effects import REGISTRY
 from handradar.vocab import EFFECTS as EFFECT_NAMES
 from tests.gap.conftest import rows, simulate
 
@@ -183,3 +187,31 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
     assert md.read_text().endswith("hand-written analysis\n")  # notes below the marker survive
     with h5py.File(next((tmp_path / "cache" / "world").glob("fake_none.h5")), "r") as h5:
         assert "truth" not in h5.attrs  # the diagnosed data never carry the truth
+
+
+def test_candidate_scan_credits_the_worlds_own_change(tmp_path, radar, short_chain, request):
+    """benchmarks/candidate_scan.py on a fake antenna-pattern case: the world's own variant closes the
+    whole gap and its change is the world's (r = 1), a weaker one part of it; the probe effect
+    palm_lobe is there to be scanned and at zero strength changes nothing."""
+    import benchmarks.probe_effects
+    from benchmarks.candidate_scan import scan
+
+    # the probe effect leaves the registry after this test: a diagnosis with candidates=None scores
+    # every registered effect, and no other test expects it
+    request.addfinalizer(lambda: REGISTRY.pop(benchmarks.probe_effects.PalmLobe.name, None))
+    case = case_world({}, next(c for c in cases(["antenna_pattern"])))
+    none = case_world({}, Case(CONTROL_NOTHING, (), "none"))
+    path = fake_world(case, radar, short_chain, tmp_path)
+    clean = fake_world(none, radar, short_chain, tmp_path, window_starts_s=window_starts(path).tolist())
+    variants = [{"antenna_pattern": {"q": 6.0}}, {"antenna_pattern": {"q": 2.0}}, {"palm_lobe": {"rcs0_m2": 0.0}}]
+    on_case = scan(path, clean, {}, variants, exponent=1.0)
+    # to the engine's re-weighting of the antenna pattern between skeleton steps (second order)
+    assert on_case[0]["gap_closed"] == pytest.approx(1.0, abs=1e-4) and on_case[0]["r"] == pytest.approx(1.0, abs=1e-4)
+    assert 0.0 < on_case[1]["gap_closed"] < 1.0 and on_case[1]["r"] > 0.5
+    assert on_case[2]["gap_closed"] == pytest.approx(0.0, abs=1e-9)
+    # the fake effect-free world is the simulator itself: no gap to close at exponent 1 (nan, not a
+    # division by zero); at 0.5 a generic gap that a candidate may close, and no world change to match
+    clean_own = fake_world(none, radar, short_chain, tmp_path)
+    assert np.isnan(scan(clean_own, None, {}, variants[:1], exponent=1.0)[0]["gap_closed"])
+    on_clean = scan(clean_own, None, {}, variants[:1], exponent=0.5)
+    assert np.isfinite(on_clean[0]["gap_closed"]) and "r" not in on_clean[0]
