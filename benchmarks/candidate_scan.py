@@ -11,6 +11,9 @@ baseline simulator at a fixed RCS exponent:
   world's change (case - effect-free world, both over the case's windows: see
   handradar.gap.benchmark.truth_side).
 
+``--grids`` scans every vocabulary effect over its documented fitting grid instead of ``--variants``
+and reports each effect at its best grid point by gap_closed on the case.
+
 In-sample and best-of-grid, so an upper bound on what a diagnosis would credit; a variant worth
 landing must also hold on the worlds it was not designed on (``+experiment=gap_benchmark_36_heldout``,
 ``..._heldout2``). Besides the vocabulary's effects, the variants may use the probe effects of
@@ -20,6 +23,7 @@ benchmarks/probe_effects.py (candidates tried and not landed).
         --variants '[{"multipath": {"scale": 0.1}}, {"multipath": {"scale": 1.0}}]'
     python -m benchmarks.candidate_scan +experiment=gap_benchmark_36_heldout2 --case palm \\
         --variants '[{"palm": {}}, {"palm_lobe": {"rcs0_m2": 0.03, "m": 1.0}}]'
+    python -m benchmarks.candidate_scan +experiment=gap_benchmark_36 --case nothing --grids
 """
 
 from __future__ import annotations
@@ -45,13 +49,15 @@ from handradar.gap.benchmark import (
 )
 from handradar.gap.data import load_dataset
 from handradar.gap.engine import VariantEngine
+from handradar.gap.fit import effect_grid
 from handradar.metrics import per_example_ssim
 from handradar.sim.factory import SimFactory
+from handradar.vocab import EFFECTS
 
 
 def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent: float) -> list[dict]:
-    """gap_closed of each variant on the dataset ``path`` (in-sample, all rows) and, with ``clean``
-    (the effect-free world at the same windows), r of its change with the world's change."""
+    """gap_closed of each variant on the dataset ``path`` (in-sample, all rows) and, with ``clean`` (the
+    effect-free world at the same windows), r of its change with the world's change."""
     data = load_dataset(path)
     factory = SimFactory.from_config(sim_cfg, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
     specs = torch.as_tensor(VariantEngine(factory.replace(rcs_exponent=exponent), factory.effects, data.rows)
@@ -69,14 +75,27 @@ def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent
     return out
 
 
+def best_per_effect(rows: list[dict]) -> dict[str, dict]:
+    """Each effect's row at its best gap_closed (rows of single-effect variants, in order)."""
+    best: dict[str, dict] = {}
+    for row in rows:
+        (name,) = row["variant"]
+        if name not in best or row["gap_closed"] > best[name]["gap_closed"]:
+            best[name] = row
+    return best
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("overrides", nargs="*", help="diagnose.py overrides, e.g. +experiment=gap_benchmark_36")
     ap.add_argument("--case", required=True, help="the benchmark case (a withheld effect) whose world is scanned")
-    ap.add_argument("--variants", required=True, help="JSON list of variants, [{effect: {param: value}}, ...]")
+    ap.add_argument("--variants", help="JSON list of variants, [{effect: {param: value}}, ...]")
+    ap.add_argument("--grids", action="store_true", help="every vocabulary effect over its documented grid")
     ap.add_argument("--exponent", type=float, default=0.25, help="the baseline's RCS exponent (step 0's usual fit)")
     args = ap.parse_args()
-    variants = json.loads(args.variants)
+    if args.grids == (args.variants is not None):
+        raise SystemExit("candidate_scan: give either --variants JSON or --grids")
+    variants = [{n: g} for n in EFFECTS for g in effect_grid(n)] if args.grids else json.loads(args.variants)
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
         cfg = compose("diagnose", overrides=args.overrides)
     bench = cfg.benchmark
@@ -85,19 +104,27 @@ def main() -> None:
     world = OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}), resolve=True)
     strengths = OmegaConf.to_container(bench.strengths, resolve=True) if bench.get("strengths") is not None else {}
     cache = Path(cfg.paths.cache_dir) / "world"
-    case = next((c for c in cases([args.case]) if c.name == args.case), None)
-    if case is None:
-        raise SystemExit(f"candidate_scan: unknown case {args.case!r}")
+    try:
+        (case,) = cases([args.case])
+    except ValueError as err:
+        raise SystemExit(f"candidate_scan: {err}") from None
     clean_cfg = case_world(world, Case(CONTROL_NOTHING, (), "none"))
     path = build_world(case_world(world, case, strengths), radar, chain, cache)
-    clean = build_world(clean_cfg, radar, chain, cache, window_starts_s=window_starts(path).tolist())
-    print("| world | variant | gap_closed, case | r with the world's change | gap_closed, effect-free world |")
+    if case.name == CONTROL_NOTHING:  # the case is the effect-free world: no change to match, no second world
+        on_case, on_clean = scan(path, None, cfg.sim, variants, args.exponent), None
+    else:
+        clean = build_world(clean_cfg, radar, chain, cache, window_starts_s=window_starts(path).tolist())
+        on_case = scan(path, clean, cfg.sim, variants, args.exponent)
+        on_clean = scan(build_world(clean_cfg, radar, chain, cache), None, cfg.sim, variants, args.exponent)
+    rows = list(best_per_effect(on_case).values()) if args.grids else on_case
+    clean_of = {json.dumps(r["variant"], sort_keys=True): r for r in on_clean or []}
+    print("| case | variant | gap_closed, case | r with the world's change | gap_closed, effect-free world |")
     print("|---|---|---|---|---|")
-    on_case = scan(path, clean, cfg.sim, variants, args.exponent)
-    on_clean = scan(build_world(clean_cfg, radar, chain, cache), None, cfg.sim, variants, args.exponent)
-    for a, b in zip(on_case, on_clean):
-        print(f"| {args.case} | `{json.dumps(a['variant'])}` | {a['gap_closed']:+.3f} | {a['r']:+.3f} | "
-              f"{b['gap_closed']:+.3f} |", flush=True)
+    for row in rows:
+        other = clean_of.get(json.dumps(row["variant"], sort_keys=True))
+        print(f"| {args.case} | `{json.dumps(row['variant'])}` | {row['gap_closed']:+.3f} | "
+              f"{'-' if 'r' not in row else format(row['r'], '+.3f')} | "
+              f"{'-' if other is None else format(other['gap_closed'], '+.3f')} |", flush=True)
 
 
 if __name__ == "__main__":

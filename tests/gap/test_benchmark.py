@@ -215,3 +215,4 @@ def test_candidate_scan_credits_the_worlds_own_change(tmp_path, radar, short_cha
     assert np.isnan(scan(clean_own, None, {}, variants[:1], exponent=1.0)[0]["gap_closed"])
     on_clean = scan(clean_own, None, {}, variants[:1], exponent=0.5)
     assert np.isfinite(on_clean[0]["gap_closed"]) and "r" not in on_clean[0]
+
