@@ -55,12 +55,14 @@ from handradar.sim.factory import SimFactory
 from handradar.vocab import EFFECTS
 
 
-def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent: float) -> list[dict]:
+def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent: float,
+         noise_draws: int = 1) -> list[dict]:
     """gap_closed of each variant on the dataset ``path`` (in-sample, all rows) and, with ``clean`` (the
-    effect-free world at the same windows), r of its change with the world's change."""
+    effect-free world at the same windows), r of its change with the world's change. ``noise_draws``:
+    a noise variant's draws averaged in power, as the diagnosis's ``diagnose.noise_draws``."""
     data = load_dataset(path)
     factory = SimFactory.from_config(sim_cfg, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
-    specs = torch.as_tensor(VariantEngine(factory.replace(rcs_exponent=exponent), factory.effects, data.rows)
+    specs = torch.as_tensor(VariantEngine(factory.replace(rcs_exponent=exponent, noise_draws=noise_draws), factory.effects, data.rows)
                             .spectrograms([{}, *variants]))
     measured = torch.as_tensor(data.measured)
     before = float(per_example_ssim(measured, specs[0]).mean())
@@ -104,6 +106,7 @@ def main() -> None:
     world = OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}), resolve=True)
     strengths = OmegaConf.to_container(bench.strengths, resolve=True) if bench.get("strengths") is not None else {}
     cache = Path(cfg.paths.cache_dir) / "world"
+    draws = int(cfg.diagnose.noise_draws)
     try:
         (case,) = cases([args.case])
     except ValueError as err:
@@ -111,11 +114,11 @@ def main() -> None:
     clean_cfg = case_world(world, Case(CONTROL_NOTHING, (), "none"))
     path = build_world(case_world(world, case, strengths), radar, chain, cache)
     if case.name == CONTROL_NOTHING:  # the case is the effect-free world: no change to match, no second world
-        on_case, on_clean = scan(path, None, cfg.sim, variants, args.exponent), None
+        on_case, on_clean = scan(path, None, cfg.sim, variants, args.exponent, draws), None
     else:
         clean = build_world(clean_cfg, radar, chain, cache, window_starts_s=window_starts(path).tolist())
-        on_case = scan(path, clean, cfg.sim, variants, args.exponent)
-        on_clean = scan(build_world(clean_cfg, radar, chain, cache), None, cfg.sim, variants, args.exponent)
+        on_case = scan(path, clean, cfg.sim, variants, args.exponent, draws)
+        on_clean = scan(build_world(clean_cfg, radar, chain, cache), None, cfg.sim, variants, args.exponent, draws)
     rows = list(best_per_effect(on_case).values()) if args.grids else on_case
     clean_of = {json.dumps(r["variant"], sort_keys=True): r for r in on_clean or []}
     print("| case | variant | gap_closed, case | r with the world's change | gap_closed, effect-free world |")
