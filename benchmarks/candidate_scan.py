@@ -62,8 +62,8 @@ def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent
     a noise variant's draws averaged in power, as the diagnosis's ``diagnose.noise_draws``."""
     data = load_dataset(path)
     factory = SimFactory.from_config(sim_cfg, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
-    specs = torch.as_tensor(VariantEngine(factory.replace(rcs_exponent=exponent, noise_draws=noise_draws), factory.effects, data.rows)
-                            .spectrograms([{}, *variants]))
+    engine = VariantEngine(factory.replace(rcs_exponent=exponent, noise_draws=noise_draws), factory.effects, data.rows)
+    specs = torch.as_tensor(engine.spectrograms([{}, *variants]))
     measured = torch.as_tensor(data.measured)
     before = float(per_example_ssim(measured, specs[0]).mean())
     world = None if clean is None else (measured - spectrograms(clean)).flatten().double()
