@@ -34,15 +34,12 @@ from pathlib import Path
 
 import torch
 from hydra import compose, initialize_config_dir
-from hydra.utils import get_method, instantiate
-from omegaconf import OmegaConf
 
 import benchmarks.probe_effects  # noqa: F401  (registers the probe effects)
 from handradar.config import VERSION_BASE, config_dir
 from handradar.gap.benchmark import (
     CONTROL_NOTHING,
-    Case,
-    case_world,
+    BenchmarkWorlds,
     cases,
     spectrograms,
     window_starts,
@@ -100,25 +97,19 @@ def main() -> None:
     variants = [{n: g} for n in EFFECTS for g in effect_grid(n)] if args.grids else json.loads(args.variants)
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
         cfg = compose("diagnose", overrides=args.overrides)
-    bench = cfg.benchmark
-    radar, chain = instantiate(cfg.radar), instantiate(cfg.chain)
-    build_world = get_method(str(bench.builder))
-    world = OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}), resolve=True)
-    strengths = OmegaConf.to_container(bench.strengths, resolve=True) if bench.get("strengths") is not None else {}
-    cache = Path(cfg.paths.cache_dir) / "world"
+    worlds = BenchmarkWorlds.from_config(cfg)
     draws = int(cfg.diagnose.noise_draws)
     try:
         (case,) = cases([args.case])
     except ValueError as err:
         raise SystemExit(f"candidate_scan: {err}") from None
-    clean_cfg = case_world(world, Case(CONTROL_NOTHING, (), "none"))
-    path = build_world(case_world(world, case, strengths), radar, chain, cache)
+    path = worlds.dataset(case)
     if case.name == CONTROL_NOTHING:  # the case is the effect-free world: no change to match, no second world
         on_case, on_clean = scan(path, None, cfg.sim, variants, args.exponent, draws), None
     else:
-        clean = build_world(clean_cfg, radar, chain, cache, window_starts_s=window_starts(path).tolist())
+        clean = worlds.clean(window_starts(path).tolist())
         on_case = scan(path, clean, cfg.sim, variants, args.exponent, draws)
-        on_clean = scan(build_world(clean_cfg, radar, chain, cache), None, cfg.sim, variants, args.exponent, draws)
+        on_clean = scan(worlds.clean(), None, cfg.sim, variants, args.exponent, draws)
     rows = list(best_per_effect(on_case).values()) if args.grids else on_case
     clean_of = {json.dumps(r["variant"], sort_keys=True): r for r in on_clean or []}
     print("| case | variant | gap_closed, case | r with the world's change | gap_closed, effect-free world |")

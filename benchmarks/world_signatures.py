@@ -30,14 +30,12 @@ from pathlib import Path
 
 import numpy as np
 from hydra import compose, initialize_config_dir
-from hydra.utils import get_method, instantiate
 from omegaconf import OmegaConf
 
 from handradar.config import VERSION_BASE, config_dir
 from handradar.gap.benchmark import (
     CONTROL_NOTHING,
-    Case,
-    case_world,
+    BenchmarkWorlds,
     cases,
     spectrograms,
     truth_side,
@@ -70,27 +68,20 @@ def main() -> None:
     args = ap.parse_args()
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
         cfg = compose("diagnose", overrides=args.overrides)
-    bench = cfg.benchmark
-    radar, chain = instantiate(cfg.radar), instantiate(cfg.chain)
-    build_world = get_method(str(bench.builder))
-    world = OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}), resolve=True)
-    strengths = OmegaConf.to_container(bench.strengths, resolve=True) if bench.get("strengths") is not None else {}
+    worlds = BenchmarkWorlds.from_config(cfg)
     diag = OmegaConf.to_container(cfg.diagnose, resolve=True)
-    cache = Path(cfg.paths.cache_dir) / "world"
-    clean_cfg = case_world(world, Case(CONTROL_NOTHING, (), "none"))
-    clean = build_world(clean_cfg, radar, chain, cache)
+    clean = worlds.clean()
     print("| case | rows | windows moved | radar signature, case's windows (mean / median) | radar signature, each "
           "world's own windows (mean / median) | world's change on the simulator: gap_closed [95 % CI] | "
           "candidate's change vs the world's, r (candidate at its default parameters) |")
     print("|---|---|---|---|---|---|---|")
-    for case in cases(list(bench.cases)):
+    for case in cases(list(cfg.benchmark.cases)):
         if case.name == CONTROL_NOTHING:
             continue
         t0 = time.perf_counter()
-        path = build_world(case_world(world, case, strengths), radar, chain, cache)
+        path = worlds.dataset(case)
         baseline, candidate = calibrated_baseline(cfg.sim, diag, path, case.truth)
-        res = truth_side(build_world, clean_cfg, path, clean, radar=radar, chain=chain, cache_dir=cache,
-                         baseline=baseline, rows=np.arange(len(baseline)), candidate=candidate)
+        res = truth_side(worlds, path, clean, baseline=baseline, rows=np.arange(len(baseline)), candidate=candidate)
         own = 1.0 - np.asarray(per_example_ssim(spectrograms(clean), spectrograms(path)))
         ref = ("-" if "reference_gap_closed" not in res else
                f"{res['reference_gap_closed']:+.3f} [{res['reference_ci95'][0]:+.3f}, {res['reference_ci95'][1]:+.3f}]")

@@ -31,7 +31,9 @@ Public API:
     radar_signature(case_path, clean_path) -> dict    (truth side: how much the effect changes the radar data)
     effect_reference(measured, clean, baseline) -> dict   (truth side: the world's change added to the
                                                        simulator's baseline spectrograms)
-    truth_side(build_world, clean_cfg, case_path, clean_path, ...) -> dict   (both, over the case's windows)
+    BenchmarkWorlds.from_config(cfg)     (a preset's worlds: .config(case), .dataset(case, window_starts_s=None),
+                                          .clean(window_starts_s=None), .radar, .chain)
+    truth_side(worlds, case_path, clean_path, ...) -> dict   (both, over the case's windows)
     score(results) -> dict                            (confusion matrix, top-1, mean gap_closed)
     run_benchmark(cfg, out_dir) -> Path               (the results markdown)
 """
@@ -110,6 +112,50 @@ def case_world(world: Mapping | None, case: Case, strengths: Mapping | None = No
         effects[name] = {**dict(effects.get(name) or {}), **own, "enabled": name in case.on}
     w["effects"] = effects
     return w
+
+
+@dataclass(frozen=True)
+class BenchmarkWorlds:
+    """The worlds of a benchmark preset: its radar and chain, the shared world settings (the ``world``
+    group with ``benchmark.world`` on top; world=heldout: other physics), the withheld effects'
+    ``benchmark.strengths`` and the builder (``benchmark.builder``) with its cache folder."""
+
+    radar: RadarConfig
+    chain: ChainConfig
+    build: Callable[..., Path]
+    world: dict
+    strengths: dict
+    cache_dir: Path
+
+    @classmethod
+    def from_config(cls, cfg: DictConfig) -> BenchmarkWorlds:
+        from hydra.utils import get_method
+
+        bench = cfg.benchmark
+        strengths = bench.get("strengths")
+        return cls(instantiate(cfg.radar), instantiate(cfg.chain), get_method(str(bench.builder)),
+                   OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}),
+                                          resolve=True),
+                   OmegaConf.to_container(strengths, resolve=True) if strengths is not None else {},
+                   Path(cfg.paths.cache_dir) / "world")
+
+    def config(self, case: Case) -> dict:
+        """The world config of ``case`` (:func:`case_world`)."""
+        return case_world(self.world, case, self.strengths)
+
+    @property
+    def clean_config(self) -> dict:
+        """The effect-free world's config."""
+        return case_world(self.world, Case(CONTROL_NOTHING, (), "none"))
+
+    def dataset(self, case: Case, window_starts_s: Sequence[float] | None = None) -> Path:
+        """The case's dataset (built once, cached), optionally over given windows (s)."""
+        extra = {} if window_starts_s is None else {"window_starts_s": list(window_starts_s)}
+        return self.build(self.config(case), self.radar, self.chain, self.cache_dir, **extra)
+
+    def clean(self, window_starts_s: Sequence[float] | None = None) -> Path:
+        """The effect-free world's dataset, optionally over another dataset's windows (s)."""
+        return self.dataset(Case(CONTROL_NOTHING, (), "none"), window_starts_s)
 
 
 def score(results: Sequence[Mapping]) -> dict:
@@ -199,8 +245,7 @@ def effect_reference(measured: torch.Tensor, clean: torch.Tensor, baseline: torc
     return out
 
 
-def truth_side(build_world: Callable[..., Path], clean_cfg: Mapping, path: Path, clean: Path, *, radar: RadarConfig,
-               chain: ChainConfig, cache_dir: Path, baseline: np.ndarray, rows: np.ndarray,
+def truth_side(worlds: BenchmarkWorlds, path: Path, clean: Path, *, baseline: np.ndarray, rows: np.ndarray,
                candidate: np.ndarray | None = None, n_boot: int = 2000, seed: int = 0) -> dict:
     """A case's truth-side columns: its radar signature and the world's change on the simulator
     (:func:`effect_reference` on ``rows`` of the case, whose baseline simulator spectrograms are
@@ -211,14 +256,14 @@ def truth_side(build_world: Callable[..., Path], clean_cfg: Mapping, path: Path,
     window (chosen from the radar data, as ingest does), and rows over other stretches of the motion
     differ by far more than the effect (the occlusion case of world/2 at 36 recordings: signature
     0.047 with each world's own windows, 0.004 at the case's). So the effect-free world is built at
-    the case's windows (``build_world(..., window_starts_s=)``) where they differ; ``windows_moved``
+    the case's windows (``worlds.clean(window_starts_s)``) where they differ; ``windows_moved``
     counts the rows whose window the effect moved. path / clean: the case's dataset and the
     effect-free world's with its own windows.
     """
     starts = window_starts(path)
     moved = ~np.isclose(window_starts(clean), starts)
     if moved.any():
-        clean = build_world(clean_cfg, radar, chain, cache_dir, window_starts_s=starts.tolist())
+        clean = worlds.clean(starts.tolist())
     case_spec, clean_spec = _paired(path, clean)
     out = {**_signature(case_spec, clean_spec), "windows_moved": int(moved.sum())}
     if out["signature_mean"] > 0:  # skeleton-side effects leave the radar data untouched: no change to add
@@ -315,21 +360,13 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
 
 def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     """Every case: build the world's dataset, diagnose it, score; write the figure, table and JSON."""
-    from hydra.utils import get_method
-
-
     bench = cfg.benchmark
     out = Path(out_dir)
-    radar, chain = instantiate(cfg.radar), instantiate(cfg.chain)
-    build_world = get_method(str(bench.builder))
-    # the shared world: the `world` group (world=heldout: other physics) with benchmark.world on top
-    world = OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}), resolve=True)
-    strengths = OmegaConf.to_container(bench.strengths, resolve=True) if bench.get("strengths") is not None else {}
+    worlds = BenchmarkWorlds.from_config(cfg)
+    radar, chain = worlds.radar, worlds.chain
     diag_cfg = OmegaConf.to_container(cfg.diagnose, resolve=True)
     sim_cfg = OmegaConf.to_container(cfg.sim, resolve=True)
     state = Path(bench.state_dir)
-    world_cache = Path(cfg.paths.cache_dir) / "world"
-    clean_cfg = case_world(world, Case(CONTROL_NOTHING, (), "none"))
     results: list[dict] = []
     t_start = time.perf_counter()
     seed = diag_cfg.get("seed", 0)
@@ -339,16 +376,16 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                      config=OmegaConf.to_container(cfg, resolve=True)):
         clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
         for case in cases(list(bench.cases)):
-            wcfg = case_world(world, case, strengths)
-            key = config_hash("gap-benchmark-case", wcfg, diag_cfg, sim_cfg, radar, chain, code_version())
+            key = config_hash("gap-benchmark-case", worlds.config(case), diag_cfg, sim_cfg, radar, chain,
+                              code_version())
             done = state / f"{case.name}-{key}.json"
             if done.is_file():
                 results.append(json.loads(done.read_text()))
                 log.info("case %s: resumed from %s", case.name, done)
                 continue
             t0 = time.perf_counter()
-            path = build_world(wcfg, radar, chain, world_cache)
-            clean = clean or build_world(clean_cfg, radar, chain, world_cache)
+            path = worlds.dataset(case)
+            clean = clean or worlds.clean()
             data = load_dataset(path)
             factory = SimFactory.from_config(cfg.sim, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
             diagnosis = diagnose(data, factory, factory.effects,
@@ -356,8 +393,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                                  progress=bool(cfg.get("progress", True)))
             write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))
             res = {**_case_result(case, diagnosis.report, time.perf_counter() - t0, len(data)),
-                   **truth_side(build_world, clean_cfg, path, clean, radar=radar, chain=chain, cache_dir=world_cache,
-                                baseline=diagnosis.baseline, rows=diagnosis.evaluation,
+                   **truth_side(worlds, path, clean, baseline=diagnosis.baseline, rows=diagnosis.evaluation,
                                 candidate=diagnosis.candidates.get(case.truth),
                                 n_boot=int(diag_cfg.get("n_boot", 2000)), seed=seed)}
             res["seconds"] = time.perf_counter() - t0
