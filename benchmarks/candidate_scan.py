@@ -41,6 +41,7 @@ from handradar.gap.benchmark import (
     CONTROL_NOTHING,
     BenchmarkWorlds,
     cases,
+    change_correlation,
     spectrograms,
     window_starts,
 )
@@ -63,13 +64,13 @@ def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent
     specs = torch.as_tensor(engine.spectrograms([{}, *variants]))
     measured = torch.as_tensor(data.measured)
     before = float(per_example_ssim(measured, specs[0]).mean())
-    world = None if clean is None else (measured - spectrograms(clean)).flatten().double()
+    world = None if clean is None else measured - spectrograms(clean)
     out = []
     for v, spec in zip(variants, specs[1:]):
         after = float(per_example_ssim(measured, spec).mean())
         row = {"variant": v, "gap_closed": (after - before) / (1.0 - before) if before < 1.0 else float("nan")}
         if world is not None:
-            row["r"] = float(torch.corrcoef(torch.stack([world, (spec - specs[0]).flatten().double()]))[0, 1])
+            row["r"] = change_correlation(world, spec - specs[0])
         out.append(row)
     return out
 
@@ -94,7 +95,10 @@ def main() -> None:
     args = ap.parse_args()
     if args.grids == (args.variants is not None):
         raise SystemExit("candidate_scan: give either --variants JSON or --grids")
-    variants = [{n: g} for n in EFFECTS for g in effect_grid(n)] if args.grids else json.loads(args.variants)
+    try:
+        variants = [{n: g} for n in EFFECTS for g in effect_grid(n)] if args.grids else json.loads(args.variants)
+    except json.JSONDecodeError as err:
+        raise SystemExit(f"candidate_scan: --variants is not JSON ({err})") from None
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
         cfg = compose("diagnose", overrides=args.overrides)
     worlds = BenchmarkWorlds.from_config(cfg)

@@ -31,6 +31,7 @@ Public API:
     radar_signature(case_path, clean_path) -> dict    (truth side: how much the effect changes the radar data)
     effect_reference(measured, clean, baseline) -> dict   (truth side: the world's change added to the
                                                        simulator's baseline spectrograms)
+    change_correlation(world_change, candidate_change) -> float   (Pearson r over every pixel)
     BenchmarkWorlds.from_config(cfg)     (a preset's worlds: .config(case), .dataset(case, window_starts_s=None),
                                           .clean(window_starts_s=None), .radar, .chain)
     truth_side(worlds, case_path, clean_path, ...) -> dict   (both, over the case's windows)
@@ -240,9 +241,14 @@ def effect_reference(measured: torch.Tensor, clean: torch.Tensor, baseline: torc
                              n_boot=n_boot, seed=seed)
     out = {"reference_gap_closed": b.estimate, "reference_ci95": list(b.ci95)}
     if candidate is not None:
-        world, cand = (measured - clean).flatten().double(), (candidate - baseline).flatten().double()
-        out["change_correlation"] = float(torch.corrcoef(torch.stack([world, cand]))[0, 1])
+        out["change_correlation"] = change_correlation(measured - clean, candidate - baseline)
     return out
+
+
+def change_correlation(world_change: torch.Tensor, candidate_change: torch.Tensor) -> float:
+    """Pearson r over every pixel between the world's change and a candidate's (same shapes)."""
+    pair = torch.stack([world_change.flatten().double(), candidate_change.flatten().double()])
+    return float(torch.corrcoef(pair)[0, 1])
 
 
 def truth_side(worlds: BenchmarkWorlds, path: Path, clean: Path, *, baseline: np.ndarray, rows: np.ndarray,
