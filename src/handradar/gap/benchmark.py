@@ -144,11 +144,6 @@ class BenchmarkWorlds:
         """The world config of ``case`` (:func:`case_world`)."""
         return case_world(self.world, case, self.strengths)
 
-    @property
-    def clean_config(self) -> dict:
-        """The effect-free world's config."""
-        return case_world(self.world, Case(CONTROL_NOTHING, (), "none"))
-
     def dataset(self, case: Case, window_starts_s: Sequence[float] | None = None) -> Path:
         """The case's dataset (built once, cached), optionally over given windows (s)."""
         extra = {} if window_starts_s is None else {"window_starts_s": list(window_starts_s)}
