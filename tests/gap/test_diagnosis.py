@@ -44,6 +44,15 @@ def run(radar, chain, data, **kw):
     return diagnose(data, builder(radar, chain), {}, cfg, progress=False)
 
 
+def step_0(radar, chain, data: GapData, **grids) -> tuple[dict, dict, dict]:
+    """Diagnose ``data`` on step 0's ``grids``: the validated report, its calibration and the mean SSIM
+    of each grid point, keyed by the point's values in grid order."""
+    rep = run(radar, chain, data, **grids).report
+    validate_report(rep, n_columns=chain.n_columns)
+    cal = rep["baseline"]["calibration"]
+    return rep, cal, {tuple(v for k, v in g.items() if k != "ssim"): g["ssim"] for g in cal["grid"]}
+
+
 def test_names_the_effect_and_recovers_its_parameter(radar, short_chain):
     # the antenna's cos^q pattern at q = 6 (default 4; grid 0.5, 1, 2, 4, 8): hands spread over +-35 deg
     data = gap_data(radar, short_chain, 12, {"antenna_pattern": {"q": 6.0}})
@@ -135,11 +144,8 @@ def test_baseline_calibration_recovers_the_bones_extent_jointly_with_the_exponen
     data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
     exponent_only = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5]).report
     assert "bone_extent" not in exponent_only["baseline"]["calibration"] and exponent_only["baseline"]["ssim"] < 0.99
-    rep = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5], bone_extents=[0.0, 0.5, 1.0]).report
-    validate_report(rep, n_columns=short_chain.n_columns)
-    cal = rep["baseline"]["calibration"]
+    rep, cal, scores = step_0(radar, short_chain, data, rcs_exponents=[1.0, 0.5], bone_extents=[0.0, 0.5, 1.0])
     assert (cal["rcs_exponent"], cal["bone_extent"]) == (0.5, 1.0) and len(cal["grid"]) == 6
-    scores = {(g["rcs_exponent"], g["bone_extent"]): g["ssim"] for g in cal["grid"]}
     assert scores[0.5, 1.0] == pytest.approx(1.0, abs=1e-4) and max(v for k, v in scores.items() if k != (0.5, 1.0)) < 0.99
     assert rep["baseline"]["ssim"] == pytest.approx(1.0, abs=1e-4) and rep["cause"] == "none"
     assert rep["settings"]["bone_extents"] == [0.0, 0.5, 1.0]
@@ -152,14 +158,10 @@ def test_baseline_calibration_recovers_a_doppler_spread(radar, short_chain, tmp_
     # "measured" = the paper's simulator with every Doppler line spread by a Gaussian of 2 rows (a generic
     # broadening: micro-motion, extended scatterers); step 0 finds it on the joint (exponent, spread) grid
     rs, labels, meta = rows(radar, short_chain, 12, seed=5)
-    measured = simulated(radar, short_chain, rs, doppler_spread=2.0)
-    data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
-    rep = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5], doppler_spreads=[0.0, 1.0, 2.0, 4.0]).report
-    validate_report(rep, n_columns=short_chain.n_columns)
-    cal = rep["baseline"]["calibration"]
+    data = GapData(simulated(radar, short_chain, rs, doppler_spread=2.0), rs, labels, meta, radar, short_chain, 100.0)
+    rep, cal, scores = step_0(radar, short_chain, data, rcs_exponents=[1.0, 0.5], doppler_spreads=[0.0, 1.0, 2.0, 4.0])
     assert (cal["rcs_exponent"], cal["doppler_spread"]) == (1.0, 2.0) and len(cal["grid"]) == 8
     assert "bone_extent" not in cal  # only the settings given more than the paper's value are fitted
-    scores = {(g["rcs_exponent"], g["doppler_spread"]): g["ssim"] for g in cal["grid"]}
     assert scores[1.0, 2.0] == pytest.approx(1.0, abs=1e-4) and max(v for k, v in scores.items() if k != (1.0, 2.0)) < 0.99
     assert rep["cause"] == "none" and rep["settings"]["doppler_spreads"] == [0.0, 1.0, 2.0, 4.0]
     assert fitted_simulator(rep)["doppler_spread"] == 2.0
@@ -176,13 +178,9 @@ def test_baseline_calibration_recovers_a_metacarpal_gain(radar, short_chain, tmp
     rs, labels, meta = rows(radar, short_chain, 12, seed=5)
     rs.skeletons = (rs.skeletons + 0.04 * np.sin(2 * np.pi * 3.0 * rs.times)[None, :, None, None, None]
                     * np.array([0.0, 0.0, 1.0])).astype(np.float32)
-    measured = simulated(radar, short_chain, rs, metacarpal_gain=0.5)
-    data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
-    rep = run(radar, short_chain, data, rcs_exponents=[1.0, 0.5], metacarpal_gains=[1.0, 0.5, 0.0]).report
-    validate_report(rep, n_columns=short_chain.n_columns)
-    cal = rep["baseline"]["calibration"]
+    data = GapData(simulated(radar, short_chain, rs, metacarpal_gain=0.5), rs, labels, meta, radar, short_chain, 100.0)
+    rep, cal, scores = step_0(radar, short_chain, data, rcs_exponents=[1.0, 0.5], metacarpal_gains=[1.0, 0.5, 0.0])
     assert (cal["rcs_exponent"], cal["metacarpal_gain"]) == (1.0, 0.5) and len(cal["grid"]) == 6
-    scores = {(g["rcs_exponent"], g["metacarpal_gain"]): g["ssim"] for g in cal["grid"]}
     assert scores[1.0, 0.5] == pytest.approx(1.0, abs=1e-4) and max(v for k, v in scores.items() if k != (1.0, 0.5)) < 0.999
     assert fitted_simulator(rep)["metacarpal_gain"] == 0.5
     text = render(rep, {}, tmp_path)

@@ -286,11 +286,10 @@ class VariantEngine:
             return "full"
         return "scatterers" if "scatterers" in stages or by_settings == "scatterers" else "signal"
 
-    def _signal(self, sim: Simulator, added: Variant, inputs, base, store: _Appended | None) -> torch.Tensor:
-        """Summed signal of one variant on one batch (before its signal stage)."""
+    def _signal(self, sim: Simulator, added: Variant, path: str, inputs, base, store: _Appended | None) -> torch.Tensor:
+        """Summed signal of one variant on one batch (before its signal stage); ``path``: its _path."""
         sk, m, t, vis = inputs
         ctx, s0, p0, sum0 = base
-        path = self._path(sim, added)
         key = ",".join(sorted(added)) or "settings"
         if path == "signal":
             self.paths[key, "signal"] += 1
@@ -337,6 +336,7 @@ class VariantEngine:
             raise ValueError(f"{len(factories)} factories for {len(variants)} variants")
         sims = [(self.build if factories is None else factories[j])(merge(self.base, v))
                 for j, v in enumerate(variants)]
+        paths = [self._path(sim, v) for sim, v in zip(sims, variants)]
         out: np.ndarray | None = None
         for pos, rows in self._batches(idx):
             inputs = self._inputs(rows)
@@ -344,8 +344,8 @@ class VariantEngine:
             if on_base is not None:
                 on_base(rows, base[2])
             store = _Appended()
-            for j, (v, sim) in enumerate(zip(variants, sims)):
-                spec = sim.spectrogram(self._signal(sim, v, inputs, base, store)).float().numpy()
+            for j, (v, sim, path) in enumerate(zip(variants, sims, paths)):
+                spec = sim.spectrogram(self._signal(sim, v, path, inputs, base, store)).float().numpy()
                 if out is None:
                     out = np.zeros((len(variants), len(idx), *spec.shape[1:]), np.float32)
                 out[j, pos] = spec
@@ -359,8 +359,9 @@ class VariantEngine:
         """(rows, spectrograms) per batch of one variant's simulator ``sim``, differentiable in its
         effect parameters (the base part is computed without gradient; appended points are not reused)."""
         idx = np.asarray(idx, dtype=np.int64)
+        path = self._path(sim, added)
         for _, rows in self._batches(idx):
             inputs = self._inputs(rows)
             with torch.no_grad():
                 base = self._base(inputs, rows)
-            yield rows, sim.spectrogram(self._signal(sim, added, inputs, base, None))
+            yield rows, sim.spectrogram(self._signal(sim, added, path, inputs, base, None))

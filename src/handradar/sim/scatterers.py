@@ -70,6 +70,12 @@ class Scatterers:
         """Amplitude gain multiplied by ``factor`` (broadcast to (B, T, K))."""
         return replace(self, gain=self.gain * factor)
 
+    def slots_scaled(self, slots: tuple[int, ...], factor: torch.Tensor | float) -> Scatterers:
+        """The points owned by ``slots`` with their amplitude gain multiplied by ``factor`` (a number
+        or a 0-d tensor, differentiable), the others unchanged."""
+        chosen = torch.isin(self.owner, torch.as_tensor(slots, device=self.owner.device))
+        return self.scaled(torch.where(chosen, torch.as_tensor(factor, dtype=self.gain.dtype), 1.0).to(self.gain.dtype))
+
 
 def bone_geometry(joints: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Midpoint, axis vector (parent -> child, not normalised) and length of each bone, metres."""

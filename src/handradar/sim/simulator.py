@@ -204,8 +204,7 @@ class Simulator(nn.Module):
         scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii, self.rcs_exponent,
                                self.bone_extent)
         if self.metacarpal_gain != 1.0:
-            meta = torch.isin(scat.owner, torch.as_tensor(METACARPAL_SLOTS, device=scat.owner.device))
-            scat = scat.scaled(torch.where(meta, self.metacarpal_gain, 1.0).to(scat.gain.dtype))
+            scat = scat.slots_scaled(METACARPAL_SLOTS, self.metacarpal_gain)
         for e in self._stage("scatterers"):
             scat = e.apply_scatterers(scat, ctx)
         return scat
