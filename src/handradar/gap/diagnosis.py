@@ -133,6 +133,7 @@ class DiagnosisConfig:
     bone_extents: list[float] | None = None  # with each exponent (None or [0.0]: one centre per bone, not fitted)
     doppler_spreads: list[float] | None = None  # ... and each Doppler spread, rows (None or [0.0]: none, not fitted)
     metacarpal_gains: list[float] | None = None  # ... and each metacarpal amplitude factor (None or [1.0]: not fitted)
+    coherences: list[float] | None = None  # ... and each share of the bones' cross terms (None or [1.0]: not fitted)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
     noise_draws: int = 4  # a noise effect's draws averaged in power (0: its expectation in closed form)
     fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
@@ -162,7 +163,7 @@ class DiagnosisConfig:
         if cfg.get("candidates") is not None:
             cfg["candidates"] = [str(c) for c in cfg["candidates"]]
         for name, top in (("rcs_exponents", 1.0), ("bone_extents", 1.0), ("doppler_spreads", 16.0),
-                          ("metacarpal_gains", 1.0)):
+                          ("metacarpal_gains", 1.0), ("coherences", 1.0)):
             if cfg.get(name) is not None:
                 cfg[name] = [float(e) for e in cfg[name]]
                 if not cfg[name] or not all(0.0 <= e <= top for e in cfg[name]):
@@ -656,7 +657,7 @@ class _Steps:
                                     "folds": cfg.folds, "fit_rows": int(len(self.folds[-1].fit_idx)),
                                     "refine_steps": cfg.refine_steps, "rcs_exponents": list(cfg.rcs_exponents or [1.0]),
                                     **{name: getattr(cfg, name) for name in ("bone_extents", "doppler_spreads",
-                                                                             "metacarpal_gains")
+                                                                             "metacarpal_gains", "coherences")
                                        if getattr(cfg, name) not in (None, [0.0])},
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
                                     "min_gap_closed": cfg.min_gap_closed}}

@@ -21,10 +21,14 @@ computed once; then each variant takes the cheapest path that gives its signal:
 
 A variant may also come with its own factory (``factories``), whose generic settings differ from
 the base's (step 0's grid, handradar.gap.fit.calibrate_settings). A setting of the signal's last
-step (``doppler_spread``) keeps the shortcuts above; one that changes the reflection points only
+step (``doppler_spread``, ``coherence``) keeps the shortcuts above; one that changes the reflection points only
 (``metacarpal_gain``, ``bone_extent``) takes the scatterer-stage path, whose checks find the
 re-weighting (the metacarpals' amplitude) or fall back to the full simulation (points that move);
 any other (``rcs_exponent``, which the effects read from the context) takes the full simulation.
+
+With coherence < 1 (Simulator.spectrogram) each path also gives the slots' own power: the base's
+(signal path), the base's with slot 38 (where added points go) replaced, or the variant's slot
+profiles' (re-weighted or full). Exact, computed only for variants that need it.
 
 Reflection points with zero gain in a whole batch (an untracked hand) are skipped, and rows that
 track the same hands are batched together, so one-hand rows cost about half.
@@ -49,6 +53,7 @@ import numpy as np
 import torch
 
 from handradar.sim.effects import REGISTRY
+from handradar.radar.chain import profile_power
 from handradar.sim.factory import SimFactory
 from handradar.sim.scatterers import N_SLOTS, Scatterers
 from handradar.sim.simulator import Simulator
@@ -84,7 +89,7 @@ def merge(base: Variant, added: Variant) -> dict[str, dict[str, float]]:
 
 # Simulator settings (Simulator.key()) that a variant's factory may change and still share the base's
 # work: applied after the summed signal, or to the reflection points only (module doc)
-SIGNAL_SETTINGS = frozenset({"doppler_spread"})
+SIGNAL_SETTINGS = frozenset({"doppler_spread", "coherence"})
 SCATTERER_SETTINGS = frozenset({"metacarpal_gain", "bone_extent"})
 
 
@@ -231,6 +236,33 @@ def point_profiles(sim: Simulator, scat: Scatterers, times: torch.Tensor) -> tup
     return torch.cat(out, 1), keep
 
 
+class _Base:
+    """One batch's base simulation: context, reflection points, slot profiles, summed signal, and
+    (computed on first use) the slots' own power with slot 38 as is or with points added to it."""
+
+    def __init__(self, ctx, scat: Scatterers, profiles: torch.Tensor, signal: torch.Tensor) -> None:
+        self.ctx, self.scat, self.profiles, self.signal = ctx, scat, profiles, signal
+        self._bones: torch.Tensor | None = None  # own power of the 38 bone slots
+        self._free: torch.Tensor | None = None  # own power of slot 38 as the base has it
+
+    def slot_power(self, sim: Simulator, extra: torch.Tensor | None = None) -> torch.Tensor:
+        """The base slots' own power (B, doppler, columns), with ``extra`` (B, F, L, Ch, bins) added
+        to slot 38 (the unweighted one) if given."""
+        if self._bones is None:
+            p = self.profiles
+            only_bones = torch.cat([p[:, :N_SLOTS], torch.zeros_like(p[:, N_SLOTS:])], 1)
+            self._bones = sim.slot_power(only_bones)
+            self._free = profile_power(self.free(), sim.chain)
+        if extra is None:
+            return self._bones + self._free
+        return self._bones + profile_power(self.free() + extra, sim.chain)
+
+    def free(self) -> torch.Tensor:
+        """Slot 38's profiles (B, F, L, Ch, bins), complex."""
+        p = self.profiles
+        return p[:, N_SLOTS] if p.is_complex() else torch.view_as_complex(p[:, N_SLOTS].float().contiguous())
+
+
 class _Appended:
     """Per-batch store of the last appended points' per-point profiles (for the constant-ratio reuse)."""
 
@@ -286,14 +318,17 @@ class VariantEngine:
             return "full"
         return "scatterers" if "scatterers" in stages or by_settings == "scatterers" else "signal"
 
-    def _signal(self, sim: Simulator, added: Variant, path: str, inputs, base, store: _Appended | None) -> torch.Tensor:
-        """Summed signal of one variant on one batch (before its signal stage); ``path``: its _path."""
+    def _signal(self, sim: Simulator, added: Variant, path: str, inputs, base: _Base, store: _Appended | None
+                ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Summed signal of one variant on one batch (before its signal stage) and, when the variant's
+        coherence is below 1, its slots' own power (else None); ``path``: its _path."""
         sk, m, t, vis = inputs
-        ctx, s0, p0, sum0 = base
+        ctx, s0, p0, sum0 = base.ctx, base.scat, base.profiles, base.signal
+        own = sim.coherence < 1.0
         key = ",".join(sorted(added)) or "settings"
         if path == "signal":
             self.paths[key, "signal"] += 1
-            return sum0
+            return sum0, base.slot_power(sim) if own else None
         if path == "scatterers":
             s1 = sim.scatterers(ctx)
             app = extra_points(s0, s1) if s1.n_points > s0.n_points else None
@@ -301,23 +336,30 @@ class VariantEngine:
                 self.paths[key, "added"] += 1
                 extra = store.signal(sim, app, ctx.times) if store is not None else \
                     profiles(sim, app, ctx.times).sum(1)
-                return sum0 if extra is None else sum0 + extra.to(sum0.dtype)
+                if extra is None:
+                    return sum0, base.slot_power(sim) if own else None
+                extra = extra.to(sum0.dtype)
+                # added points are unweighted: they join slot 38, the one slot whose own power changes
+                power = base.slot_power(sim, extra) if own else None
+                return sum0 + extra, power
             w = slot_weights(s0, s1)
             if w is not None:
                 self.paths[key, "reweighted"] += 1
-                return sim.combine(p0, w, times=t)
+                return sim.combine(p0, w, times=t), sim.slot_power(p0, w, times=t) if own else None
             self.paths[key, "full"] += 1
-            return sim.combine(profiles(sim, s1, ctx.times))
+            p1 = profiles(sim, s1, ctx.times)
+            return sim.combine(p1), sim.slot_power(p1) if own else None
         self.paths[key, "full"] += 1
         ctx1 = sim.context(sk, m, times=t, visibility=vis)
-        return sim.combine(profiles(sim, sim.scatterers(ctx1), ctx1.times))
+        p1 = profiles(sim, sim.scatterers(ctx1), ctx1.times)
+        return sim.combine(p1), sim.slot_power(p1) if own else None
 
-    def _base(self, inputs, rows: np.ndarray):
+    def _base(self, inputs, rows: np.ndarray) -> _Base:
         sk, m, t, vis = inputs
         ctx = self.base_sim.context(sk, m, times=t, visibility=vis)
         s0 = self.base_sim.scatterers(ctx)
         p0 = self.base_profiles(rows) if self.base_profiles is not None else profiles(self.base_sim, s0, ctx.times)
-        return ctx, s0, p0, self.base_sim.combine(p0)
+        return _Base(ctx, s0, p0, self.base_sim.combine(p0))
 
     @torch.no_grad()
     def spectrograms(self, variants: Sequence[Variant], idx: np.ndarray | None = None,
@@ -342,10 +384,10 @@ class VariantEngine:
             inputs = self._inputs(rows)
             base = self._base(inputs, rows)
             if on_base is not None:
-                on_base(rows, base[2])
+                on_base(rows, base.profiles)
             store = _Appended()
             for j, (v, sim, path) in enumerate(zip(variants, sims, paths)):
-                spec = sim.spectrogram(self._signal(sim, v, path, inputs, base, store)).float().numpy()
+                spec = sim.spectrogram(*self._signal(sim, v, path, inputs, base, store)).float().numpy()
                 if out is None:
                     out = np.zeros((len(variants), len(idx), *spec.shape[1:]), np.float32)
                 out[j, pos] = spec
@@ -364,4 +406,4 @@ class VariantEngine:
             inputs = self._inputs(rows)
             with torch.no_grad():
                 base = self._base(inputs, rows)
-            yield rows, sim.spectrogram(self._signal(sim, added, path, inputs, base, None))
+            yield rows, sim.spectrogram(*self._signal(sim, added, path, inputs, base, None))

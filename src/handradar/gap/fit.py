@@ -79,7 +79,8 @@ def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:
 GENERIC_SETTINGS: dict[str, tuple[str, float]] = {"rcs_exponents": ("rcs_exponent", 1.0),
                                                   "bone_extents": ("bone_extent", 0.0),
                                                   "doppler_spreads": ("doppler_spread", 0.0),
-                                                  "metacarpal_gains": ("metacarpal_gain", 1.0)}
+                                                  "metacarpal_gains": ("metacarpal_gain", 1.0),
+                                                  "coherences": ("coherence", 1.0)}
 
 
 def generic_grid(values: Mapping[str, Sequence[float] | None]) -> list[dict[str, float]]:

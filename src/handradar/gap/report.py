@@ -125,7 +125,7 @@ def fitted_simulator(report: dict, sim_settings: Mapping | None = None) -> dict:
     settings = {k: v for k, v in dict(sim_settings or {}).items()
                 if not str(k).startswith("_") and k not in ("effects", "effect_params", "from_report")}
     calibration = report["baseline"].get("calibration") or {}
-    for name in ("rcs_exponent", "bone_extent", "doppler_spread", "metacarpal_gain"):  # step 0's (gap.fit.GENERIC_SETTINGS)
+    for name in ("rcs_exponent", "bone_extent", "doppler_spread", "metacarpal_gain", "coherence"):  # step 0's (gap.fit.GENERIC_SETTINGS)
         if name in calibration:
             settings[name] = float(calibration[name])
     return {**settings, "effects": effects, "effect_params": {k: params.get(k, {}) for k in effects}}

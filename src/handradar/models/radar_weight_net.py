@@ -90,4 +90,4 @@ def enhanced_spectrogram(net: RadarWeightNet, sim, slot_profiles: torch.Tensor, 
                          mask: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
     """Modelling + RadarWeightNet: weights from the features, weighted slot sum, shared chain."""
     weights = net(features, mask)
-    return sim.spectrogram(sim.combine(slot_profiles, weights, times=times))
+    return sim.render(slot_profiles, weights, times=times)

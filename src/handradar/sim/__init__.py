@@ -22,7 +22,7 @@ Typical use (RadarWeightNet in handradar.models.radar_weight_net, features in ha
     sim = SimFactory.from_config(cfg.sim, radar, chain)()       # or Simulator(radar, chain, effects=["noise"])
     spec = sim(skeleton, mask)                                 # the modelling-only simulator
     prof = sim.slot_profiles(skeleton, mask)                   # network-independent: cache it
-    spec = sim.spectrogram(sim.combine(prof, net(features, mask)))   # + RadarWeightNet
+    spec = sim.render(prof, net(features, mask))               # + RadarWeightNet
 
 Import the submodules directly (this package module imports nothing, so importing one submodule
 does not load the rest).

@@ -30,7 +30,7 @@ from handradar.sim.simulator import Simulator
 EffectSet = Mapping[str, Mapping[str, Any]]
 
 SETTINGS = ("hand", "skeleton_rate_hz", "tx_power_w", "gain_tx_dbi", "gain_rx_dbi", "rcs_exponent", "bone_extent",
-            "doppler_spread", "metacarpal_gain", "compile_combine")
+            "doppler_spread", "metacarpal_gain", "coherence", "compile_combine")
 # keys of a sim config that are not settings: Hydra's, and the two that become ``effects``
 _NOT_SETTINGS = {"_target_", "_partial_", "_recursive_", "_convert_", "effects", "effect_params", "noise_draws",
                  "from_report"}

@@ -12,7 +12,8 @@ Pipeline of one batch (every step torch, differentiable end to end):
       -> weighted sum with RadarWeightNet weights (or 1)                      (B, F, L, Ch, bins)
       -> signal-stage effects (noise)
       -> handradar.radar.chain.spectrogram_from_profiles: the chain of the measured data (B, 64, 32),
-         with the power spread in Doppler (doppler_spread) before dB
+         with the slots' cross terms kept in the share ``coherence`` and the power spread in Doppler
+         (doppler_spread) before dB
 
 The window starts at a frame boundary, so its chirp times are ``radar.chirp_times_s(frames)``
 with frames = chain.frames_per_window(radar); the skeleton times default to
@@ -25,7 +26,8 @@ Public API:
 
     Simulator(radar, chain, *, hand=HandModelConfig(), effects=(), effect_params=None,
               skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5,
-              rcs_exponent=1.0, bone_extent=0.0, doppler_spread=0.0, metacarpal_gain=1.0, compile_combine=False)
+              rcs_exponent=1.0, bone_extent=0.0, doppler_spread=0.0, metacarpal_gain=1.0, coherence=1.0,
+              compile_combine=False)
       rcs_exponent: aspect exponent of every cylinder's RCS (handradar.sim.rcs; 1 = the paper's)
       bone_extent: fraction of each bone's length its reflection is spread over (handradar.sim.scatterers;
             0 = the paper's single centre at the midpoint)
@@ -35,6 +37,14 @@ Public API:
       metacarpal_gain: amplitude factor of the four finger metacarpals' reflection points (1 = the
             paper's cylinders; 0 = none, as if the palm's flesh buried them): a generic knob of
             step 0, since wrist-to-knuckle cylinders are the hand model's crudest part
+      coherence: the share of the slots' cross terms kept in the chain's power (1 = the paper's
+            coherent sum; 0 = the sum of each slot's own power). Relative phases between bones
+            depend on their ranges to a fraction of the 3.9 mm wavelength, far below what a skeleton
+            tracker resolves: a 0.5 mm change of the reference world's finger radius changes its
+            spectrograms as much as its palm does. With phase errors of independent slots,
+            E[exp(i phi)] = rho, the expected power is rho^2 |sum s_k|^2 + (1 - rho^2) sum |s_k|^2:
+            coherence = rho^2 (Gaussian errors of std sigma: exp(-sigma^2)). Each bone slot is one
+            surface, and slot 38 (palm, forearm, multipath) one more part
       compile_combine: torch.compile the weighted sum (see profiles.combine_slots)
       .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
       .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
@@ -42,7 +52,12 @@ Public API:
       .combine(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, F, L, Ch, bins)
             weights (B, T, 38) positive at the skeleton steps (slot = hand * 19 + bone),
             upsampled linearly in time to the chirp times
-      .spectrogram(signal) -> (B, doppler, columns) in [0, 1] (signal effects, then the chain)
+      .slot_power(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, doppler, columns)
+            the sum of each slot's own chain power (the incoherent part; same arguments as combine)
+      .spectrogram(signal, slot_power=None) -> (B, doppler, columns) in [0, 1] (signal effects, then
+            the chain); slot_power is needed when coherence < 1
+      .render(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, doppler, columns)
+            spectrogram(combine(...), slot_power(...)): what every caller with slot profiles uses
       .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
       .key() -> dict of everything that determines the output (cache keys)
       .chirp_times (F, L, C) float64 buffer, seconds
@@ -119,7 +134,7 @@ class Simulator(nn.Module):
                  effects: list | tuple = (), effect_params: dict | None = None, skeleton_rate_hz: float = 100.0,
                  tx_power_w: float = 0.0158, gain_tx_dbi: float = 10.5, gain_rx_dbi: float = 10.5,
                  rcs_exponent: float = 1.0, bone_extent: float = 0.0, doppler_spread: float = 0.0,
-                 metacarpal_gain: float = 1.0, compile_combine: bool = False) -> None:
+                 metacarpal_gain: float = 1.0, coherence: float = 1.0, compile_combine: bool = False) -> None:
         super().__init__()
         self.radar, self.chain = radar, chain
         self.hand = hand if isinstance(hand, HandModelConfig) else HandModelConfig(**dict(hand or {}))
@@ -138,6 +153,9 @@ class Simulator(nn.Module):
         self.metacarpal_gain = float(metacarpal_gain)
         if not 0.0 <= self.metacarpal_gain <= 1.0:
             raise ValueError(f"metacarpal_gain must be in [0, 1] (1: the paper's cylinders), found {metacarpal_gain}")
+        self.coherence = float(coherence)
+        if not 0.0 <= self.coherence <= 1.0:
+            raise ValueError(f"coherence must be in [0, 1] (1: the paper's coherent sum), found {coherence}")
         self.effects = nn.ModuleList(build_effects(list(effects), dict(effect_params or {})))
         self.register_buffer("chirp_times", torch.as_tensor(window_chirp_times(radar, chain), dtype=torch.float64),
                              persistent=False)
@@ -153,6 +171,7 @@ class Simulator(nn.Module):
                 **({"bone_extent": self.bone_extent} if self.bone_extent else {}),
                 **({"doppler_spread": self.doppler_spread} if self.doppler_spread else {}),
                 **({"metacarpal_gain": self.metacarpal_gain} if self.metacarpal_gain != 1.0 else {}),
+                **({"coherence": self.coherence} if self.coherence != 1.0 else {}),
                 "effects": [(e.name, e.values(), e.settings()) for e in self.effects]}
 
     def effect(self, name: str) -> Effect:
@@ -245,12 +264,35 @@ class Simulator(nn.Module):
         out = combine_slots(slot_profiles, w, self.radar.n_rx, active, compiled=self.compile_combine)
         return out if scale is None else out * scale.to(out.real.dtype).reshape(-1, 1, 1, 1, 1)
 
-    def spectrogram(self, signal: torch.Tensor) -> torch.Tensor:
+    def slot_power(self, slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, *,
+                   times: torch.Tensor | None = None, active: torch.Tensor | None = None,
+                   scale: torch.Tensor | None = None) -> torch.Tensor:
+        """The sum of each slot's own chain power (B, doppler, columns): the spectrogram's power when
+        the slots' relative phases are unknown (their cross terms average out). Arguments as
+        :meth:`combine`; slot by slot, so no (B, 39, ...) temporary."""
+        real = torch.view_as_real(slot_profiles) if slot_profiles.is_complex() else slot_profiles
+        acc = torch.float64 if real.dtype == torch.float64 else torch.float32
+        w = None if weights is None else self.upsample(weights, times).repeat_interleave(self.radar.n_rx, dim=-1)
+        keep = [k for k in range(N_SLOTS) if active is None or bool(active[k])] + [N_SLOTS]
+        power = None
+        for k in keep:
+            p = torch.view_as_complex(real[:, k].to(acc).contiguous())
+            if w is not None and k < N_SLOTS:
+                p = p * w[:, k, ..., None].to(acc)
+            pk = profile_power(p, self.chain)
+            power = pk if power is None else power + pk
+        if scale is not None:
+            power = power * scale.to(power.dtype).reshape(-1, 1, 1) ** 2
+        return power
+
+    def spectrogram(self, signal: torch.Tensor, slot_power: torch.Tensor | None = None) -> torch.Tensor:
         """Summed signal -> signal-stage effects -> the shared chain -> (B, doppler, columns) in [0, 1].
 
         A stochastic signal effect with ``draws`` > 1 (noise) is drawn that many times and the chain's
         power averaged before dB; with ``draws`` = 0 its expected power is added in closed form
-        (``expected_power``, the limit of many draws): the expected spectrogram either way."""
+        (``expected_power``, the limit of many draws): the expected spectrogram either way. With
+        coherence c < 1, ``slot_power`` (:meth:`slot_power` of the slots summed into ``signal``)
+        replaces the share 1 - c of the signal's own power: c |S|^2 + (1 - c) sum |s_k|^2 (+ noise)."""
         stage = self._stage("signal")
         drawn = [e for e in stage if getattr(e, "draws", 1) > 0]
         draws = max([e.draws for e in drawn if hasattr(e, "draws")] + [1])
@@ -264,11 +306,25 @@ class Simulator(nn.Module):
         for e in stage:
             if e not in drawn:  # after the drawn ones (noise, order 80, is the last signal effect)
                 power = power + e.expected_power(s, self.radar, self.chain)
+        if self.coherence < 1.0:
+            if slot_power is None:
+                raise ValueError("coherence < 1 needs the slots' own power: Simulator.render, or spectrogram(signal, "
+                                 "slot_power(...))")
+            power = power + (1.0 - self.coherence) * (slot_power.to(power.dtype) - profile_power(signal, self.chain))
         return power_to_unit(spread_doppler(power, self.doppler_spread), self.chain)
+
+    def render(self, slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, *,
+               times: torch.Tensor | None = None, active: torch.Tensor | None = None,
+               scale: torch.Tensor | None = None) -> torch.Tensor:
+        """Slot profiles -> spectrogram (B, doppler, columns): :meth:`combine`, then :meth:`spectrogram`
+        with the slots' own power when coherence < 1. Arguments as :meth:`combine`."""
+        signal = self.combine(slot_profiles, weights, times=times, active=active, scale=scale)
+        power = None if self.coherence >= 1.0 else self.slot_power(slot_profiles, weights, times=times,
+                                                                     active=active, scale=scale)
+        return self.spectrogram(signal, power)
 
     def forward(self, skeleton: torch.Tensor, mask: torch.Tensor, weights: torch.Tensor | None = None, *,
                 times: torch.Tensor | None = None, visibility: torch.Tensor | None = None) -> torch.Tensor:
         ctx = self.context(skeleton, mask, times=times, visibility=visibility)
-        signal = self.combine(self._profiles(ctx), weights, times=times)
-        return self.spectrogram(signal)
+        return self.render(self._profiles(ctx), weights, times=times)
 

@@ -97,7 +97,7 @@ def load_pairs(caches: DatasetCaches, targets: np.ndarray | None, rows: np.ndarr
 
 def _spectrograms(sim: Simulator, net: RadarWeightNet | None, p: Pairs) -> torch.Tensor:
     weights = None if net is None else net(p.features, p.masks)
-    return sim.spectrogram(sim.combine(p.profiles, weights, active=p.active.any(0)))
+    return sim.render(p.profiles, weights, active=p.active.any(0))
 
 
 @torch.no_grad()
@@ -114,7 +114,7 @@ def predict(sim: Simulator, net: RadarWeightNet | None, pairs: Pairs, batch_size
 def predict_cached(sim: Simulator, net: RadarWeightNet | None, caches: DatasetCaches, rows: np.ndarray,
                    batch_size: int = 32) -> torch.Tensor:
     """Simulated spectrograms (N, 64, 32) of cache ``rows``, read batch by batch: the profiles stay
-    float16 as stored (Simulator.combine scales them), so memory holds one batch, not N rows
+    float16 as stored (Simulator.render scales them), so memory holds one batch, not N rows
     unpacked to complex64 (5 MB each: 14 GB for DHG 14/28's 2800 sequences)."""
     if net is not None:
         net.eval()
@@ -125,7 +125,7 @@ def predict_cached(sim: Simulator, net: RadarWeightNet | None, caches: DatasetCa
         packed, scale, active = caches.profiles.load(sel)
         weights = None if net is None else net(torch.as_tensor(caches.features.features[sel], dtype=torch.float32),
                                                torch.as_tensor(caches.masks[sel], dtype=torch.bool))
-        out.append(sim.spectrogram(sim.combine(packed, weights, active=active.any(0), scale=scale)))
+        out.append(sim.render(packed, weights, active=active.any(0), scale=scale))
     return torch.cat(out) if out else torch.zeros(0, sim.chain.stft_len, sim.chain.n_columns)
 
 

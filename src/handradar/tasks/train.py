@@ -359,7 +359,8 @@ class Job:
                                      "synth.fitted.rcs_exponent": settings.get("rcs_exponent", 1.0),
                                      "synth.fitted.bone_extent": settings.get("bone_extent", 0.0),
                                      "synth.fitted.doppler_spread": settings.get("doppler_spread", 0.0),
-                                     "synth.fitted.metacarpal_gain": settings.get("metacarpal_gain", 1.0)})
+                                     "synth.fitted.metacarpal_gain": settings.get("metacarpal_gain", 1.0),
+                                     "synth.fitted.coherence": settings.get("coherence", 1.0)})
         return settings
 
     def synthesis_sims(self, split: Split) -> list[dict | None]:

@@ -40,7 +40,7 @@ def plot_decomposition(sim, pairs, weights: np.ndarray, path: str | Path, *, tit
     prof = pairs.profiles  # (1, 39, F, L, Ch, bins)
     with torch.no_grad():
         full_sig = sim.combine(prof, w)
-        full = sim.spectrogram(full_sig)[0].numpy()
+        full = sim.render(prof, w)[0].numpy()
         singles = []
         for k in range(w.shape[-1]):  # each bone slot alone: zero every other slot's profile
             only = torch.zeros_like(prof)

@@ -44,7 +44,7 @@ How the gap diagnosis uses this API (calibration split only):
 
 Caching: skeleton- and scatterer-stage effects change the per-slot profiles, so a profile cache
 (handradar.sim.cache) is keyed by the effects and their values; signal-stage effects (noise) run
-after the weighted sum and can reuse cached profiles (Simulator.spectrogram(Simulator.combine(...))).
+after the weighted sum and can reuse cached profiles (Simulator.render).
 Stochastic effects (noise) draw from their own generator (``seed``); ``reset_rng()`` replays
 the same draws, so that grid points are compared on the same noise.
 """
