@@ -189,6 +189,20 @@ def test_baseline_calibration_recovers_a_metacarpal_gain(radar, short_chain, tmp
         DiagnosisConfig.from_mapping({"metacarpal_gains": [1.5]})
 
 
+def test_baseline_calibration_recovers_a_coherence(radar, short_chain, tmp_path):
+    # "measured" = the paper's simulator with the bones' cross terms averaged out (their relative phases
+    # unknown: Simulator coherence 0); step 0 finds it on the joint (exponent, coherence) grid
+    rs, labels, meta = rows(radar, short_chain, 12, seed=5)
+    data = GapData(simulated(radar, short_chain, rs, coherence=0.0), rs, labels, meta, radar, short_chain, 100.0)
+    rep, cal, scores = step_0(radar, short_chain, data, rcs_exponents=[1.0, 0.5], coherences=[1.0, 0.5, 0.0])
+    assert (cal["rcs_exponent"], cal["coherence"]) == (1.0, 0.0) and len(cal["grid"]) == 6
+    assert scores[1.0, 0.0] == pytest.approx(1.0, abs=1e-4) and max(v for k, v in scores.items() if k != (1.0, 0.0)) < 0.999
+    assert fitted_simulator(rep)["coherence"] == 0.0
+    assert "and the bones' cross terms kept at 0" in render(rep, {}, tmp_path)
+    with pytest.raises(ValueError, match="coherences"):
+        DiagnosisConfig.from_mapping({"coherences": [1.5]})
+
+
 def test_step_0_fits_the_baselines_noise_and_compares_its_expected_spectrogram(radar, short_chain, tmp_path):
     # "measured" = one noise draw at 5 dB (like a measurement); the baseline's noise sits at its default 20 dB
     data = gap_data(radar, short_chain, 12, {"noise": {"snr_db": 5.0}}, seed=3)

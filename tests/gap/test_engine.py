@@ -19,10 +19,13 @@ VARIANTS = [{}, {"noise": {"snr_db": 10.0}}, {"palm": {"radius_m": 0.03}},
             {"antenna_pattern": {"q": 6.0}}, {"sync_offset": {"offset_s": 0.05}}]
 
 
+@pytest.mark.parametrize("coherence", [1.0, 0.4])
 @pytest.mark.parametrize("base", [{}, {"palm": {}}, {"multipath": {}}])
-def test_variants_match_full_simulation(radar, short_chain, base):
+def test_variants_match_full_simulation(radar, short_chain, base, coherence):
+    """Every path of the engine, also with the slots' own power (coherence < 1: added points join
+    slot 38, re-weighted slots and full simulations give their own)."""
     rs, _, _ = rows(radar, short_chain, 2, seed=1)  # one- and two-hand rows (kept in this order)
-    build = builder(radar, short_chain)
+    build = builder(radar, short_chain).replace(coherence=coherence)
     engine = VariantEngine(build, base, rs, batch_size=2)
     out = engine.spectrograms(VARIANTS)
     paths = {k: p for (k, p) in engine.paths}
@@ -57,7 +60,7 @@ def test_constant_ratio_and_slot_weights():
 
 
 def test_variant_factories_share_the_base_where_their_settings_allow(radar, short_chain):
-    """A variant with its own generic settings: a Doppler spread re-uses the base's signal, a metacarpal
+    """A variant with its own generic settings: a Doppler spread or a coherence re-uses the base's signal, a metacarpal
     gain re-weights its slot profiles, an RCS exponent (read by the effects from the context) is
     simulated in full; each gives the simulator's own spectrogram, also across a tracking dropout
     inside the window (the points reflect nothing there; the weights are interpolated in between)."""
@@ -65,12 +68,12 @@ def test_variant_factories_share_the_base_where_their_settings_allow(radar, shor
     rs.masks[:, 20:23] = False
     build = builder(radar, short_chain)
     base = {"forearm": {"length_m": 0.1}}
-    settings = [{"doppler_spread": 2.0}, {"metacarpal_gain": 0.5}, {"metacarpal_gain": 0.0},
+    settings = [{"doppler_spread": 2.0}, {"coherence": 0.5}, {"metacarpal_gain": 0.5}, {"metacarpal_gain": 0.0},
                 {"rcs_exponent": 0.5}, {"bone_extent": 1.0}]
     engine = VariantEngine(build, base, rs, batch_size=2)
     factories = [build.replace(**s) for s in settings]
     out = engine.spectrograms([{}] * len(settings), factories=factories)
-    assert engine.paths == {("settings", "signal"): 1, ("settings", "reweighted"): 2, ("settings", "full"): 2}
+    assert engine.paths == {("settings", "signal"): 2, ("settings", "reweighted"): 2, ("settings", "full"): 2}
     for s, f, spec in zip(settings, factories, out):
         with torch.no_grad():
             ref = f(base)(torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks),
@@ -86,9 +89,11 @@ def test_step_0_scores_every_grid_point_as_its_own_simulator_would(radar, short_
     rs, _, _ = rows(radar, short_chain, 4, seed=2)
     build = builder(radar, short_chain)
     measured = simulate(radar, short_chain, rs, {})
-    grid = generic_grid({"rcs_exponents": [1.0, 0.25], "metacarpal_gains": [1.0, 0.5], "doppler_spreads": [0.0, 1.0]})
+    grid = generic_grid({"rcs_exponents": [1.0, 0.25], "metacarpal_gains": [1.0, 0.5], "doppler_spreads": [0.0, 1.0],
+                         "coherences": [1.0, 0.0]})
     best, scores = calibrate_settings(build, {}, rs, np.arange(4), measured, grid, batch_size=4)
-    assert best == {"rcs_exponent": 1.0, "doppler_spread": 0.0, "metacarpal_gain": 1.0} and len(scores) == 8
+    assert best == {"rcs_exponent": 1.0, "doppler_spread": 0.0, "metacarpal_gain": 1.0, "coherence": 1.0}
+    assert len(scores) == 16
     for point, score in zip(grid, scores):
         with torch.no_grad():
             spec = build.replace(**point)()(torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks),

@@ -17,6 +17,7 @@ from handradar.sim.interp import interpolate_time, upsample_to_chirps
 from handradar.sim.profiles import combine_slots, scatterer_profiles, window_chirp_times
 from handradar.sim.scatterers import (
     METACARPAL_SLOTS,
+    N_SLOTS,
     Scatterers,
     bone_scatterers,
     radar_amplitude,
@@ -342,3 +343,39 @@ def test_simulator_doppler_spread_is_validated_keyed_and_widens_a_moving_hand(ra
         return float((Simulator(radar, short_chain, doppler_spread=spread)(sk, mk)[0] > 0.5).sum(0).float().mean())
 
     assert occupied_rows(3.0) > occupied_rows(0.0)
+
+
+def test_coherence_is_the_expected_power_over_unknown_slot_phases(radar, short_chain):
+    """Simulator.render at coherence c = cos(a)^2 equals, exactly, the mean chain power over every
+    draw of independent slot phases +-a (E[exp(i phi)] = cos a, so the cross terms keep cos(a)^2):
+    c = 1 the coherent sum, c = 0 the sum of the slots' own power. Weights and the float16 cache's
+    per-row scale enter the slots' own power as they enter the sum; c < 1 without the slots' power
+    is refused, and the setting is validated and keyed."""
+    import itertools
+
+    from handradar.radar.chain import power_to_unit, profile_power
+
+    with pytest.raises(ValueError, match="coherence"):
+        Simulator(radar, short_chain, coherence=1.5)
+    assert "coherence" not in Simulator(radar, short_chain).key()
+    assert Simulator(radar, short_chain, coherence=0.5).key()["coherence"] == 0.5
+    t = np.arange(int(round(short_chain.frames_per_window(radar) * radar.frame_period_s * 100))) / 100
+    pos, mask = window(t, hands=1, seed=5)
+    sk, mk = torch.as_tensor(pos[None]).double(), torch.as_tensor(mask[None])
+    full = Simulator(radar, short_chain).slot_profiles(sk, mk).to(torch.complex128)
+    slots = [3, 7, 38]  # two bones and the unweighted slot: 2^3 phase draws
+    prof = torch.zeros_like(full)
+    prof[:, slots] = full[:, slots]
+    weights = 0.5 + torch.rand(1, len(t), N_SLOTS, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    for a in (0.0, 0.7, np.pi / 2):
+        sim = Simulator(radar, short_chain, coherence=float(np.cos(a) ** 2))
+        w = sim.upsample(weights).repeat_interleave(radar.n_rx, dim=-1)[..., None]
+        power = 0.0
+        for signs in itertools.product((1.0, -1.0), repeat=len(slots)):
+            s = sum(prof[:, k] * (w[:, k] if k < N_SLOTS else 1.0) * np.exp(1j * sg * a) for k, sg in zip(slots, signs))
+            power = power + profile_power(s, short_chain) / 2 ** len(slots)
+        torch.testing.assert_close(sim.render(prof, weights), power_to_unit(power, short_chain), atol=1e-6, rtol=0)
+        scale = torch.tensor([3.0], dtype=torch.float64)
+        torch.testing.assert_close(sim.render(prof, weights, scale=scale), sim.render(prof * 3.0, weights))
+    with pytest.raises(ValueError, match="coherence < 1"):
+        Simulator(radar, short_chain, coherence=0.5).spectrogram(Simulator(radar, short_chain).combine(prof))

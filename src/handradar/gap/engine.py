@@ -52,8 +52,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from handradar.sim.effects import REGISTRY
 from handradar.radar.chain import profile_power
+from handradar.sim.effects import REGISTRY
 from handradar.sim.factory import SimFactory
 from handradar.sim.scatterers import N_SLOTS, Scatterers
 from handradar.sim.simulator import Simulator
