@@ -42,11 +42,13 @@ Public API:
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import json
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,6 +73,7 @@ from handradar.runs.tables import fmt_number
 from handradar.sim.factory import SimFactory
 from handradar.viz.gap import confusion_figure
 from handradar.vocab import EFFECTS
+from handradar.world.config import world_config
 
 log = logging.getLogger(__name__)
 
@@ -152,6 +155,23 @@ class BenchmarkWorlds:
     def clean(self, window_starts_s: Sequence[float] | None = None) -> Path:
         """The effect-free world's dataset, optionally over another dataset's windows (s)."""
         return self.dataset(Case(CONTROL_NOTHING, (), "none"), window_starts_s)
+
+    def setting(self, dotted: str) -> Any:
+        """The shared world setting at ``dotted`` (e.g. ``scene.finger_radius_m``), defaults filled in."""
+        value: Any = world_config(self.world)
+        for key in dotted.split("."):
+            value = getattr(value, key)
+        return value
+
+    def with_setting(self, dotted: str, value: Any) -> BenchmarkWorlds:
+        """The same worlds with the shared setting at ``dotted`` set to ``value``."""
+        w = copy.deepcopy(self.world)
+        *head, last = dotted.split(".")
+        node = w
+        for key in head:
+            node = node.setdefault(key, {})
+        node[last] = value
+        return dataclasses.replace(self, world=w)
 
 
 def score(results: Sequence[Mapping]) -> dict:
