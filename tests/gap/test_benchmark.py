@@ -13,6 +13,7 @@ from omegaconf import OmegaConf
 from handradar.data.hdf5 import open_writer
 from handradar.gap.benchmark import (
     CONTROL_NOTHING,
+    BenchmarkWorlds,
     Case,
     case_world,
     cases,
@@ -45,6 +46,21 @@ def test_cases_switch_one_effect_and_keep_other_settings():
     w = case_world({"effects": {"noise": {"snr_db": 5.0}}}, cs[0], strong)
     assert w["effects"]["palm"] == {"thickness_m": 0.04, "enabled": True}
     assert w["effects"]["noise"] == {"snr_db": 5.0, "enabled": False}
+
+
+def test_worlds_read_and_move_one_shared_setting(radar, short_chain, tmp_path):
+    """BenchmarkWorlds.setting reads a shared world setting with the generator's defaults filled in;
+    with_setting moves it in a copy (the phase-twin probe), leaving the original and the cases'
+    effect switches as they were."""
+    worlds = BenchmarkWorlds(radar, short_chain, lambda *a, **k: tmp_path, {"scene": {"facet_turn": 0.5}}, {},
+                             tmp_path)
+    assert worlds.setting("scene.finger_radius_m") == 0.0085 and worlds.setting("scene.facet_turn") == 0.5
+    twin = worlds.with_setting("scene.finger_radius_m", 0.009)
+    assert twin.setting("scene.finger_radius_m") == 0.009 and twin.setting("scene.facet_turn") == 0.5
+    assert worlds.setting("scene.finger_radius_m") == 0.0085 and "finger_radius_m" not in worlds.world["scene"]
+    (palm,) = cases(["palm"])
+    assert twin.config(palm)["effects"] == worlds.config(palm)["effects"]
+    assert twin.with_setting("seed", 7).setting("seed") == 7
 
 
 def test_score_counts_effects_and_controls():
