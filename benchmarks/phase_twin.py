@@ -34,7 +34,13 @@ from omegaconf import OmegaConf
 
 from benchmarks.world_signatures import calibrated_baseline
 from handradar.config import VERSION_BASE, config_dir
-from handradar.gap.benchmark import BenchmarkWorlds, cases, change_correlation, spectrograms, window_starts
+from handradar.gap.benchmark import (
+    BenchmarkWorlds,
+    cases,
+    change_correlation,
+    spectrograms,
+    window_starts,
+)
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 
 RADAR_SIDE = ("occlusion", "palm", "forearm", "multipath", "antenna_pattern", "iq_imbalance")
