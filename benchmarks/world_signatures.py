@@ -42,7 +42,8 @@ from handradar.gap.benchmark import (
 )
 from handradar.gap.data import load_dataset
 from handradar.gap.engine import VariantEngine
-from handradar.gap.fit import GENERIC_SETTINGS, calibrate_settings, generic_grid
+from handradar.gap.fit import calibrate_settings, generic_grid
+from handradar.gap.report import GENERIC_SETTINGS
 from handradar.metrics import per_example_ssim
 from handradar.sim.factory import SimFactory
 from handradar.vocab import EFFECTS

@@ -7,7 +7,7 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    paper's formula) that fits the calibration split best (``rcs_exponents``), jointly with the
    bones' extent along their length (``bone_extents``; handradar.sim.scatterers) and a Gaussian spread
    of the power along Doppler (``doppler_spreads``; Simulator.spread_doppler), each off by default
-   (the paper's one centre per bone, no spread; gap.fit.GENERIC_SETTINGS). This generic
+   (the paper's one centre per bone, no spread; gap.report.GENERIC_SETTINGS). This generic
    calibration comes first so that candidates are scored on the gap it leaves: without it, any
    candidate that adds slow, broad returns (a palm disc, radar-table image paths) closes part of the generic
    "the cylinders are too specular" gap in every data set and wins where its effect is absent.
@@ -85,7 +85,6 @@ from handradar.data.splits import stratified_partition
 from handradar.gap.data import GapData
 from handradar.gap.engine import Variant, VariantEngine, merge
 from handradar.gap.fit import (
-    GENERIC_SETTINGS,
     GridFit,
     calibrate_settings,
     effect_grid,
@@ -95,7 +94,7 @@ from handradar.gap.fit import (
     in_vocabulary_order,
     refine,
 )
-from handradar.gap.report import FACTORS, FORMAT
+from handradar.gap.report import FACTORS, FORMAT, GENERIC_SETTINGS
 from handradar.gap.rwn import rwn_readout
 from handradar.gap.specificity import pixel_specificity, row_factors, specificity
 from handradar.gap.where import (
@@ -162,8 +161,7 @@ class DiagnosisConfig:
                              f"{sorted(cls.__dataclass_fields__)}")
         if cfg.get("candidates") is not None:
             cfg["candidates"] = [str(c) for c in cfg["candidates"]]
-        for name, top in (("rcs_exponents", 1.0), ("bone_extents", 1.0), ("doppler_spreads", 16.0),
-                          ("metacarpal_gains", 1.0), ("coherences", 1.0)):
+        for name, (_, _, top) in GENERIC_SETTINGS.items():
             if cfg.get(name) is not None:
                 cfg[name] = [float(e) for e in cfg[name]]
                 if not cfg[name] or not all(0.0 <= e <= top for e in cfg[name]):
@@ -550,7 +548,7 @@ class _Steps:
         reported = self.folds[-1]
         self.build, self.base, self.calibration = reported.build, reported.base, dict(reported.calibration)
         if len(self.folds) > 1:
-            keys = [setting for setting, _ in GENERIC_SETTINGS.values()] + ["effects"]
+            keys = [setting for setting, _, _ in GENERIC_SETTINGS.values()] + ["effects"]
             self.calibration["folds"] = [{k: f.calibration[k] for k in keys if k in f.calibration} for f in self.scored]
         self.base_sim = self.build(self.base)
 
@@ -656,9 +654,8 @@ class _Steps:
                        "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
                                     "folds": cfg.folds, "fit_rows": int(len(self.folds[-1].fit_idx)),
                                     "refine_steps": cfg.refine_steps, "rcs_exponents": list(cfg.rcs_exponents or [1.0]),
-                                    **{name: getattr(cfg, name) for name in ("bone_extents", "doppler_spreads",
-                                                                             "metacarpal_gains", "coherences")
-                                       if getattr(cfg, name) not in (None, [0.0])},
+                                    **{name: getattr(cfg, name) for name in GENERIC_SETTINGS
+                                       if name != "rcs_exponents" and getattr(cfg, name) not in (None, [0.0])},
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
                                     "min_gap_closed": cfg.min_gap_closed}}
 

@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from handradar.gap.engine import RowSet, VariantEngine, merge
+from handradar.gap.report import GENERIC_SETTINGS
 from handradar.metrics import fast_ssim_loss, per_example_ssim
 from handradar.sim.effects import REGISTRY
 from handradar.sim.factory import SimFactory
@@ -74,13 +75,6 @@ def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:
     return float(per_example_ssim(target, torch.as_tensor(spec)).mean())
 
 
-# Step 0's generic simulator settings: the diagnosis's list of values to try -> (the simulator
-# setting, its value in the paper's model). A setting whose list is only that value is not fitted.
-GENERIC_SETTINGS: dict[str, tuple[str, float]] = {"rcs_exponents": ("rcs_exponent", 1.0),
-                                                  "bone_extents": ("bone_extent", 0.0),
-                                                  "doppler_spreads": ("doppler_spread", 0.0),
-                                                  "metacarpal_gains": ("metacarpal_gain", 1.0),
-                                                  "coherences": ("coherence", 1.0)}
 
 
 def generic_grid(values: Mapping[str, Sequence[float] | None]) -> list[dict[str, float]]:
@@ -88,7 +82,7 @@ def generic_grid(values: Mapping[str, Sequence[float] | None]) -> list[dict[str,
     lists by GENERIC_SETTINGS name, None: the paper's value). The RCS exponent is in every point;
     another setting only when more than the paper's value is tried."""
     axes = []
-    for name, (setting, paper) in GENERIC_SETTINGS.items():
+    for name, (setting, paper, _) in GENERIC_SETTINGS.items():
         vals = [float(v) for v in (values.get(name) or [paper])]
         if setting == "rcs_exponent" or vals != [paper]:
             axes.append([(setting, v) for v in vals])

@@ -10,6 +10,16 @@ from pathlib import Path
 
 from handradar.atomic import atomic_write_text
 
+# Step 0's generic simulator settings (handradar.gap.fit.calibrate_settings): the diagnosis's list of
+# values to try -> (the simulator setting, its value in the paper's model, the largest value allowed).
+# A setting whose list is only the paper's value is not fitted; the report's calibration holds the
+# fitted ones, which fitted_simulator (below) writes back as ``sim`` settings.
+GENERIC_SETTINGS: dict[str, tuple[str, float, float]] = {"rcs_exponents": ("rcs_exponent", 1.0, 1.0),
+                                                         "bone_extents": ("bone_extent", 0.0, 1.0),
+                                                         "doppler_spreads": ("doppler_spread", 0.0, 16.0),
+                                                         "metacarpal_gains": ("metacarpal_gain", 1.0, 1.0),
+                                                         "coherences": ("coherence", 1.0, 1.0)}
+
 FORMAT = "handradar.gap_report/1"
 FACTORS = ("gesture", "angle_deg", "hands", "occlusion", "subject")
 VERDICTS = ("none", "inconclusive")  # the values of ``cause`` that name no effect (handradar.gap.diagnosis.decide)
@@ -116,7 +126,7 @@ def write_report(path: str | Path, report: dict, *, n_doppler: int = 64, n_colum
 
 def fitted_simulator(report: dict, sim_settings: Mapping | None = None) -> dict:
     """The simulator a diagnosis fitted, as ``sim`` settings (conf/sim/fitted.yaml reads them back):
-    the baseline's settings with step 0's calibrated RCS exponent (and bone extent, Doppler spread), and the baseline's effects plus
+    the baseline's settings with step 0's calibrated generic settings (GENERIC_SETTINGS), and the baseline's effects plus
     those the greedy selection kept, each with its fitted parameters."""
     base = dict(report["baseline"].get("effects") or {})
     after = report["after"]
@@ -125,7 +135,7 @@ def fitted_simulator(report: dict, sim_settings: Mapping | None = None) -> dict:
     settings = {k: v for k, v in dict(sim_settings or {}).items()
                 if not str(k).startswith("_") and k not in ("effects", "effect_params", "from_report")}
     calibration = report["baseline"].get("calibration") or {}
-    for name in ("rcs_exponent", "bone_extent", "doppler_spread", "metacarpal_gain", "coherence"):  # step 0's (gap.fit.GENERIC_SETTINGS)
+    for name, _, _ in GENERIC_SETTINGS.values():
         if name in calibration:
             settings[name] = float(calibration[name])
     return {**settings, "effects": effects, "effect_params": {k: params.get(k, {}) for k in effects}}

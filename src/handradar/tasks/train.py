@@ -61,7 +61,7 @@ from handradar.data.hdf5 import read_attrs
 from handradar.data.splits import Split, few_shot_split, make_split
 from handradar.gap.data import load_dataset
 from handradar.gap.job import fit_simulator
-from handradar.gap.report import write_report
+from handradar.gap.report import GENERIC_SETTINGS, write_report
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import code_version, config_hash
 from handradar.runs.mlflow import DataRef, Tracker, flatten, tracked_run
@@ -356,11 +356,8 @@ class Job:
             self.tracker.log_artifact(f, "synthesis")
             self.tracker.log_artifact(self.state / "fit_report.json", "synthesis")
             self.tracker.log_params({"synth.fitted.effects": ",".join(settings["effects"]) or "-",
-                                     "synth.fitted.rcs_exponent": settings.get("rcs_exponent", 1.0),
-                                     "synth.fitted.bone_extent": settings.get("bone_extent", 0.0),
-                                     "synth.fitted.doppler_spread": settings.get("doppler_spread", 0.0),
-                                     "synth.fitted.metacarpal_gain": settings.get("metacarpal_gain", 1.0),
-                                     "synth.fitted.coherence": settings.get("coherence", 1.0)})
+                                     **{f"synth.fitted.{name}": settings.get(name, paper)
+                                        for name, paper, _ in GENERIC_SETTINGS.values()}})
         return settings
 
     def synthesis_sims(self, split: Split) -> list[dict | None]:
