@@ -75,8 +75,6 @@ def _mean_ssim(target: torch.Tensor, spec: np.ndarray) -> float:
     return float(per_example_ssim(target, torch.as_tensor(spec)).mean())
 
 
-
-
 def generic_grid(values: Mapping[str, Sequence[float] | None]) -> list[dict[str, float]]:
     """Step 0's grid: every combination of the generic settings' values (``values``: the diagnosis's
     lists by GENERIC_SETTINGS name, None: the paper's value). The RCS exponent is in every point;
