@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -10,7 +11,12 @@ import torch
 
 from handradar.hand.retarget import standard_hand
 from handradar.hand.skeleton import BONE_CHILD, BONE_NAMES, BONE_PARENT
-from handradar.radar.chain import range_profiles_from_adc, spectrogram_from_profiles
+from handradar.radar.chain import (
+    power_to_unit,
+    profile_power,
+    range_profiles_from_adc,
+    spectrogram_from_profiles,
+)
 from handradar.radar.signal import beat_signal
 from handradar.sim.cache import pack
 from handradar.sim.interp import interpolate_time, upsample_to_chirps
@@ -314,12 +320,22 @@ def test_doppler_spread_adds_its_variance_and_keeps_the_power():
     assert spread_doppler(line, 0.0) is line
 
 
+def window_times(radar, chain) -> np.ndarray:
+    """Skeleton step times (s) at 100 Hz over one window of ``chain``."""
+    return np.arange(int(round(chain.frames_per_window(radar) * radar.frame_period_s * 100))) / 100
+
+
+def assert_setting_checked_and_keyed(radar, chain, name: str, bad: float, value: float) -> None:
+    """Simulator setting ``name`` refuses ``bad``, is absent from key() at its default and keyed at ``value``."""
+    with pytest.raises(ValueError, match=name):
+        Simulator(radar, chain, **{name: bad})
+    assert name not in Simulator(radar, chain).key()
+    assert Simulator(radar, chain, **{name: value}).key()[name] == value
+
+
 def test_metacarpal_gain_scales_the_metacarpals_only_and_is_validated_and_keyed(radar, short_chain):
-    with pytest.raises(ValueError, match="metacarpal_gain"):
-        Simulator(radar, short_chain, metacarpal_gain=1.5)
-    assert "metacarpal_gain" not in Simulator(radar, short_chain).key()
-    assert Simulator(radar, short_chain, metacarpal_gain=0.25).key()["metacarpal_gain"] == 0.25
-    t = np.arange(int(round(short_chain.frames_per_window(radar) * radar.frame_period_s * 100))) / 100
+    assert_setting_checked_and_keyed(radar, short_chain, "metacarpal_gain", 1.5, 0.25)
+    t = window_times(radar, short_chain)
     pos, mask = window(t, hands=2, seed=3)
     sk, mk = torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
     base, half = (Simulator(radar, short_chain, metacarpal_gain=g) for g in (1.0, 0.5))
@@ -331,11 +347,8 @@ def test_metacarpal_gain_scales_the_metacarpals_only_and_is_validated_and_keyed(
 
 
 def test_simulator_doppler_spread_is_validated_keyed_and_widens_a_moving_hand(radar, short_chain):
-    with pytest.raises(ValueError, match="doppler_spread"):
-        Simulator(radar, short_chain, doppler_spread=-1.0)
-    assert "doppler_spread" not in Simulator(radar, short_chain).key()
-    assert Simulator(radar, short_chain, doppler_spread=1.5).key()["doppler_spread"] == 1.5
-    t = np.arange(int(round(short_chain.frames_per_window(radar) * radar.frame_period_s * 100))) / 100
+    assert_setting_checked_and_keyed(radar, short_chain, "doppler_spread", -1.0, 1.5)
+    t = window_times(radar, short_chain)
     pos, mask = window(t, hands=1, seed=3)
     sk, mk = torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
 
@@ -351,15 +364,8 @@ def test_coherence_is_the_expected_power_over_unknown_slot_phases(radar, short_c
     c = 1 the coherent sum, c = 0 the sum of the slots' own power. Weights and the float16 cache's
     per-row scale enter the slots' own power as they enter the sum; c < 1 without the slots' power
     is refused, and the setting is validated and keyed."""
-    import itertools
-
-    from handradar.radar.chain import power_to_unit, profile_power
-
-    with pytest.raises(ValueError, match="coherence"):
-        Simulator(radar, short_chain, coherence=1.5)
-    assert "coherence" not in Simulator(radar, short_chain).key()
-    assert Simulator(radar, short_chain, coherence=0.5).key()["coherence"] == 0.5
-    t = np.arange(int(round(short_chain.frames_per_window(radar) * radar.frame_period_s * 100))) / 100
+    assert_setting_checked_and_keyed(radar, short_chain, "coherence", 1.5, 0.5)
+    t = window_times(radar, short_chain)
     pos, mask = window(t, hands=1, seed=5)
     sk, mk = torch.as_tensor(pos[None]).double(), torch.as_tensor(mask[None])
     full = Simulator(radar, short_chain).slot_profiles(sk, mk).to(torch.complex128)

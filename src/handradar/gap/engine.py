@@ -249,9 +249,7 @@ class _Base:
         """The base slots' own power (B, doppler, columns), with ``extra`` (B, F, L, Ch, bins) added
         to slot 38 (the unweighted one) if given."""
         if self._bones is None:
-            p = self.profiles
-            only_bones = torch.cat([p[:, :N_SLOTS], torch.zeros_like(p[:, N_SLOTS:])], 1)
-            self._bones = sim.slot_power(only_bones)
+            self._bones = sim.slot_power(self.profiles, unweighted=False)
             self._free = profile_power(self.free(), sim.chain)
         if extra is None:
             return self._bones + self._free

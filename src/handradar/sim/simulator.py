@@ -266,14 +266,15 @@ class Simulator(nn.Module):
 
     def slot_power(self, slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, *,
                    times: torch.Tensor | None = None, active: torch.Tensor | None = None,
-                   scale: torch.Tensor | None = None) -> torch.Tensor:
+                   scale: torch.Tensor | None = None, unweighted: bool = True) -> torch.Tensor:
         """The sum of each slot's own chain power (B, doppler, columns): the spectrogram's power when
         the slots' relative phases are unknown (their cross terms average out). Arguments as
-        :meth:`combine`; slot by slot, so no (B, 39, ...) temporary."""
+        :meth:`combine`; ``unweighted=False`` leaves slot 38 out. Slot by slot, so no (B, 39, ...)
+        temporary."""
         real = torch.view_as_real(slot_profiles) if slot_profiles.is_complex() else slot_profiles
         acc = torch.float64 if real.dtype == torch.float64 else torch.float32
         w = None if weights is None else self.upsample(weights, times).repeat_interleave(self.radar.n_rx, dim=-1)
-        keep = [k for k in range(N_SLOTS) if active is None or bool(active[k])] + [N_SLOTS]
+        keep = [k for k in range(N_SLOTS) if active is None or bool(active[k])] + ([N_SLOTS] if unweighted else [])
         power = None
         for k in keep:
             p = torch.view_as_complex(real[:, k].to(acc).contiguous())
@@ -296,13 +297,18 @@ class Simulator(nn.Module):
         stage = self._stage("signal")
         drawn = [e for e in stage if getattr(e, "draws", 1) > 0]
         draws = max([e.draws for e in drawn if hasattr(e, "draws")] + [1])
-        power = 0.0
-        for _ in range(draws):
+        own = None  # the summed signal's own power, if computed
+        if drawn:
+            power = 0.0
+            for _ in range(draws):
+                s = signal
+                for e in drawn:
+                    s = e.apply_signal(s, self.radar, self.chain)
+                power = power + profile_power(s, self.chain)
+            power = power / draws
+        else:
             s = signal
-            for e in drawn:
-                s = e.apply_signal(s, self.radar, self.chain)
-            power = power + profile_power(s, self.chain)
-        power = power / draws
+            power = own = profile_power(signal, self.chain)
         for e in stage:
             if e not in drawn:  # after the drawn ones (noise, order 80, is the last signal effect)
                 power = power + e.expected_power(s, self.radar, self.chain)
@@ -310,7 +316,8 @@ class Simulator(nn.Module):
             if slot_power is None:
                 raise ValueError("coherence < 1 needs the slots' own power: Simulator.render, or spectrogram(signal, "
                                  "slot_power(...))")
-            power = power + (1.0 - self.coherence) * (slot_power.to(power.dtype) - profile_power(signal, self.chain))
+            own = profile_power(signal, self.chain) if own is None else own
+            power = power + (1.0 - self.coherence) * (slot_power.to(power.dtype) - own)
         return power_to_unit(spread_doppler(power, self.doppler_spread), self.chain)
 
     def render(self, slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, *,
