@@ -89,9 +89,11 @@ from handradar.gap.fit import (
     calibrate_settings,
     effect_grid,
     fit_baseline_effects,
+    floor_snr_offsets,
     generic_grid,
     grid_fit,
     in_vocabulary_order,
+    measured_floor_db,
     refine,
 )
 from handradar.gap.report import FACTORS, FORMAT, GENERIC_SETTINGS
@@ -135,6 +137,7 @@ class DiagnosisConfig:
     coherences: list[float] | None = None  # ... and each share of the bones' cross terms (None or [1.0]: not fitted)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
     noise_draws: int = 4  # a noise effect's draws averaged in power (0: its expectation in closed form)
+    noise_floor: bool = False  # a noise effect's level follows each row's measured floor (conf/diagnose.yaml)
     fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
     refine_steps: int = 0  # gradient steps after the grid for effects with fit == "grad" (0: grid only)
     refine_rows: int = 8  # calibration rows of each gradient step
@@ -536,17 +539,37 @@ class _Steps:
         calibration["effect_grids"] = {k: f.as_dict() for k, f in fits.items()}
         fold.build, fold.base, fold.calibration = build, base, calibration
 
+    def noise_floor(self) -> dict | None:
+        """With ``noise_floor``: each row's measured noise floor (handradar.gap.fit.measured_floor_db,
+        read where the paper's noise-free baseline shows nothing), which every noise effect of the
+        diagnosis then follows through per-row SNR offsets (RowSet.snr_offset_db); its summary for the
+        report. A per-row reading of the measurement, not a fit: the same in every fold."""
+        rows = self.data.rows
+        rows.snr_offset_db = None
+        if not self.cfg.noise_floor:
+            return None
+        quiet = {k: v for k, v in self.base.items() if k != "noise"}
+        spec = VariantEngine(self.build, quiet, rows, batch_size=self.cfg.batch_size).spectrograms([{}])[0]
+        levels = measured_floor_db(self.data.measured, spec, self.data.chain.dynamic_range_db)
+        rows.snr_offset_db = floor_snr_offsets(levels)
+        seen = levels[np.isfinite(levels)]
+        return {"rows_observed": int(len(seen)),
+                "level_db_percentiles": [float(v) for v in np.percentile(seen, [10, 50, 90])] if len(seen) else []}
+
     def calibrate(self) -> None:
         """Step 0 (module doc) before any candidate is scored, in every fold: the generic settings, then the
         parameters of the baseline's own effects given it; the fitted values replace the defaults in the
         baseline. The reported baseline is the last fold's (the parameter fit)."""
         if "occlusion" in self.base:  # the baseline simulated below then needs visibility
             self.bone_features(self.base_sim)
+        floor = self.noise_floor()
         self.generic_grid = generic_grid({name: getattr(self.cfg, name) for name in GENERIC_SETTINGS})
         for fold in self.folds:
             self.calibrate_fold(fold)
         reported = self.folds[-1]
         self.build, self.base, self.calibration = reported.build, reported.base, dict(reported.calibration)
+        if floor is not None:
+            self.calibration["noise_floor"] = floor
         if len(self.folds) > 1:
             keys = [setting for setting, _, _ in GENERIC_SETTINGS.values()] + ["effects"]
             self.calibration["folds"] = [{k: f.calibration[k] for k in keys if k in f.calibration} for f in self.scored]

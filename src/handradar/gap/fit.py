@@ -14,6 +14,11 @@ their grids, then optional gradient steps.
     grid_fit(engine, candidates, idx, measured, grids=None) -> {effect: GridFit}
         one pass over the rows scores every grid point of every candidate (mean SSIM; a grid point
         whose spectrograms are not finite scores -inf)
+    measured_floor_db(measured, simulated, dynamic_range_db) -> (N,) dB
+        each measured row's noise level over the display floor, from the mean of its pixels where the
+        noise-free simulation shows nothing (speckle statistics; NaN where not observable)
+    floor_snr_offsets(levels) -> (N,) dB
+        the per-row SNR offsets of a noise effect that follow those floors (0 where not observable)
     refine(engine, name, values, idx, measured, steps, lr) -> dict[str, float]
         Adam on the effect's parameters (step sizes a fraction ``lr`` of each parameter's range),
         projected into bounds after each step; used for effects with ``fit == "grad"``
@@ -27,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from scipy import special
 
 from handradar.gap.engine import RowSet, VariantEngine, merge
 from handradar.gap.report import GENERIC_SETTINGS
@@ -156,6 +162,34 @@ def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, 
         j = int(np.argmax(f.scores))
         f.best, f.best_score = dict(f.grid[j]), f.scores[j]
     return fits
+
+
+def measured_floor_db(measured: np.ndarray, simulated: np.ndarray, dynamic_range_db: float) -> np.ndarray:
+    """Each measured row's noise level in dB relative to the display floor (unit value 0), (N,).
+
+    Read where the noise-free simulation of the row (``simulated``, same shape (N, doppler, columns))
+    sits at the floor, i.e. away from every modelled return. Receiver noise is speckle, exponential in
+    power: with mean power m times the floor F, a pixel shows u = max(0, 10 log10(X / F)) / range, and
+    E[range u] = (10 / ln 10) E1(1 / m) (E1 the exponential integral), increasing in m; the level is
+    10 log10 m at which that equals the mean of those pixels. NaN where no such pixel is above the floor
+    (noise wholly below it) or none is left: not observable there."""
+    floor = simulated <= 0.0
+    n = floor.sum(axis=(1, 2))
+    shown = np.where(floor, measured, 0.0).sum(axis=(1, 2)) * dynamic_range_db / np.maximum(n, 1)  # mean dB above F
+    grid = np.linspace(-40.0, 60.0, 10001)
+    curve = 10.0 / np.log(10.0) * special.exp1(10.0 ** (-grid / 10.0))
+    level = np.interp(shown, curve, grid)
+    return np.where((n > 0) & (shown > curve[0]), level, np.nan)
+
+
+def floor_snr_offsets(levels: np.ndarray) -> np.ndarray:
+    """Per-row SNR offsets (dB) for a noise effect whose level follows each row's measured floor:
+    minus the row's level over the median of the observable ones (a floor 3 dB higher: 3 dB less SNR),
+    so ``snr_db`` stays the level of the median row; 0 where the level is not observable (NaN)."""
+    ok = np.isfinite(levels)
+    if not ok.any():
+        return np.zeros(len(levels))
+    return np.where(ok, np.median(levels[ok]) - levels, 0.0)
 
 
 def refine(engine: VariantEngine, name: str, values: dict[str, float], idx: np.ndarray, measured: np.ndarray, *,

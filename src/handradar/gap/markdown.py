@@ -41,6 +41,12 @@ def _calibration(cal: dict | None) -> str:
     if cal.get("effects"):
         text += ("; the baseline's own effects fitted there on their grids: "
                  + "; ".join(f"{k} {_params(v)}" for k, v in cal["effects"].items()))
+    floor = cal.get("noise_floor")
+    if floor:
+        pct = floor["level_db_percentiles"]
+        spread = f" (10/50/90 %: {', '.join(f'{v:+.1f}' for v in pct)} dB over the display floor)" if pct else ""
+        text += (f"; a noise effect follows each row's measured floor, observable in {floor['rows_observed']} "
+                 f"rows{spread}")
     return text
 
 
