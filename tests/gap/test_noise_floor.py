@@ -57,10 +57,9 @@ def test_noise_at_levels_that_differ_by_row_is_followed(radar, short_chain, tmp_
     measured floor, the noise candidate closes more of the gap and the offsets split the halves."""
     rs, labels, meta = rows(radar, short_chain, 16, seed=4)
     snr = np.where(np.arange(16) % 8 < 4, 0.0, 20.0)  # half of every gesture at each level
-    measured = np.concatenate([simulate(radar, short_chain, rs.take(np.flatnonzero(snr == s)), {"noise": {"snr_db": s}})
-                               for s in (0.0, 20.0)])
-    order = np.concatenate([np.flatnonzero(snr == s) for s in (0.0, 20.0)])
-    measured[order] = measured.copy()
+    halves = [np.flatnonzero(snr == level) for level in (0.0, 20.0)]
+    measured = np.concatenate([simulate(radar, short_chain, rs.take(idx), {"noise": {"snr_db": snr[idx[0]]}})
+                               for idx in halves])[np.argsort(np.concatenate(halves))]  # back in row order
     data = GapData(measured, rs, labels, meta, radar, short_chain, 100.0)
     closed = {}
     for follow in (False, True):

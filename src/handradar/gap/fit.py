@@ -176,10 +176,13 @@ def measured_floor_db(measured: np.ndarray, simulated: np.ndarray, dynamic_range
     floor = simulated <= 0.0
     n = floor.sum(axis=(1, 2))
     shown = np.where(floor, measured, 0.0).sum(axis=(1, 2)) * dynamic_range_db / np.maximum(n, 1)  # mean dB above F
-    grid = np.linspace(-40.0, 60.0, 10001)
-    curve = 10.0 / np.log(10.0) * special.exp1(10.0 ** (-grid / 10.0))
-    level = np.interp(shown, curve, grid)
-    return np.where((n > 0) & (shown > curve[0]), level, np.nan)
+    level = np.interp(shown, _SPECKLE_MEAN_DB, _SPECKLE_LEVEL_DB)
+    return np.where((n > 0) & (shown > _SPECKLE_MEAN_DB[0]), level, np.nan)
+
+
+# E[max(0, 10 log10 X)] for exponential X of mean 10^(L / 10), tabulated over the level L (dB): increasing
+_SPECKLE_LEVEL_DB = np.linspace(-40.0, 60.0, 10001)
+_SPECKLE_MEAN_DB = 10.0 / np.log(10.0) * special.exp1(10.0 ** (-_SPECKLE_LEVEL_DB / 10.0))
 
 
 def floor_snr_offsets(levels: np.ndarray) -> np.ndarray:
