@@ -28,15 +28,31 @@ def test_floor_level_from_speckle_against_the_closed_form(chain):
     measured = power_to_unit(torch.as_tensor(power), chain).numpy()
     simulated = np.zeros_like(measured)
     simulated[:, :4] = 0.5  # a modelled return: those pixels are not read
-    got = measured_floor_db(measured, simulated, chain.dynamic_range_db)
+    got, hidden = measured_floor_db(measured, simulated, chain.dynamic_range_db)
     np.testing.assert_allclose(got, levels_db, atol=0.1)
-    # not observable: nothing above the floor, or no floor pixel left
+    assert not hidden.any()
+    # faint returns the simulation lacks, at slow speeds (inner Doppler half, zero Doppler at row 32):
+    # not noise, and not read as such; the same returns at fast speeds are
+    faint = measured.copy()
+    faint[:, 20:44] = np.maximum(faint[:, 20:44], 0.3)
+    np.testing.assert_allclose(measured_floor_db(faint, simulated, chain.dynamic_range_db)[0], levels_db, atol=0.1)
+    faint = measured.copy()
+    faint[:, 50:64] = np.maximum(faint[:, 50:64], 0.9)
+    assert (measured_floor_db(faint, simulated, chain.dynamic_range_db)[0] > levels_db + 1.0).all()
+    # nothing above the floor: the noise is below it, at most the level of one pixel expected above it
+    # among the row's n floor pixels; no floor pixel left: unknown
     measured[0] = 0.0
     simulated[1] = 1.0
-    got = measured_floor_db(measured, simulated, chain.dynamic_range_db)
-    assert np.isnan(got[:2]).all() and np.isfinite(got[2:]).all()
+    got, hidden = measured_floor_db(measured, simulated, chain.dynamic_range_db)
+    n_floor = (33 - 4) * 256  # the outer Doppler half (|row - 32| >= 16: rows 0-16, 48-63) less the 4 modelled
+    np.testing.assert_allclose(got[0], -10.0 * np.log10(np.log(n_floor)))
+    assert hidden.tolist() == [True] + [False] * 6
+    assert np.isnan(got[1]) and np.isfinite(got[2:]).all()
+    # a row 20 dB above the floor observed under a noise-free one: their offsets differ by the levels
     off = floor_snr_offsets(got)
-    np.testing.assert_allclose(off, [0.0, 0.0, *(np.median(got[2:]) - got[2:])])
+    ok = np.isfinite(got)
+    np.testing.assert_allclose(off, np.where(ok, np.median(got[ok]) - got, 0.0))
+    assert off[1] == 0.0 and off[0] - off[-1] > 25.0
     assert not floor_snr_offsets(np.full(3, np.nan)).any()
 
 

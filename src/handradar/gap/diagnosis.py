@@ -541,7 +541,7 @@ class _Steps:
 
     def noise_floor(self) -> dict | None:
         """With ``noise_floor``: each row's measured noise floor (handradar.gap.fit.measured_floor_db,
-        read where the paper's noise-free baseline shows nothing), which every noise effect of the
+        read where the paper's noise-free baseline shows nothing, at the outer Doppler half's speeds), which every noise effect of the
         diagnosis then follows through per-row SNR offsets (RowSet.snr_offset_db); its summary for the
         report. A per-row reading of the measurement, not a fit: the same in every fold."""
         rows = self.data.rows
@@ -550,10 +550,10 @@ class _Steps:
             return None
         quiet = {k: v for k, v in self.base.items() if k != "noise"}
         spec = VariantEngine(self.build, quiet, rows, batch_size=self.cfg.batch_size).spectrograms([{}])[0]
-        levels = measured_floor_db(self.data.measured, spec, self.data.chain.dynamic_range_db)
+        levels, hidden = measured_floor_db(self.data.measured, spec, self.data.chain.dynamic_range_db)
         rows.snr_offset_db = floor_snr_offsets(levels)
-        seen = levels[np.isfinite(levels)]
-        return {"rows_observed": int(len(seen)),
+        seen = levels[np.isfinite(levels) & ~hidden]
+        return {"rows_observed": int(len(seen)), "rows_below_floor": int(hidden.sum()),
                 "level_db_percentiles": [float(v) for v in np.percentile(seen, [10, 50, 90])] if len(seen) else []}
 
     def calibrate(self) -> None:

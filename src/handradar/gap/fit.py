@@ -14,9 +14,10 @@ their grids, then optional gradient steps.
     grid_fit(engine, candidates, idx, measured, grids=None) -> {effect: GridFit}
         one pass over the rows scores every grid point of every candidate (mean SSIM; a grid point
         whose spectrograms are not finite scores -inf)
-    measured_floor_db(measured, simulated, dynamic_range_db) -> (N,) dB
+    measured_floor_db(measured, simulated, dynamic_range_db) -> ((N,) dB, (N,) bool below the floor)
         each measured row's noise level over the display floor, from the mean of its pixels where the
-        noise-free simulation shows nothing (speckle statistics; NaN where not observable)
+        noise-free simulation shows nothing, in the outer Doppler half (speckle statistics; a bound
+        where the noise is below the floor, NaN where no such pixel is left)
     floor_snr_offsets(levels) -> (N,) dB
         the per-row SNR offsets of a noise effect that follow those floors (0 where not observable)
     refine(engine, name, values, idx, measured, steps, lr) -> dict[str, float]
@@ -164,20 +165,31 @@ def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, 
     return fits
 
 
-def measured_floor_db(measured: np.ndarray, simulated: np.ndarray, dynamic_range_db: float) -> np.ndarray:
-    """Each measured row's noise level in dB relative to the display floor (unit value 0), (N,).
+def measured_floor_db(measured: np.ndarray, simulated: np.ndarray,
+                      dynamic_range_db: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each measured row's noise level in dB relative to the display floor (unit value 0), (N,), and
+    which rows show no noise above the floor (N,) bool.
 
-    Read where the noise-free simulation of the row (``simulated``, same shape (N, doppler, columns))
-    sits at the floor, i.e. away from every modelled return. Receiver noise is speckle, exponential in
-    power: with mean power m times the floor F, a pixel shows u = max(0, 10 log10(X / F)) / range, and
-    E[range u] = (10 / ln 10) E1(1 / m) (E1 the exponential integral), increasing in m; the level is
-    10 log10 m at which that equals the mean of those pixels. NaN where no such pixel is above the floor
-    (noise wholly below it) or none is left: not observable there."""
-    floor = simulated <= 0.0
+    Read where the noise-free simulation of the row (``simulated``, same shape (N, doppler, columns),
+    zero Doppler at row doppler // 2) sits at the floor, i.e. away from every modelled return, and only
+    in the outer half of the Doppler axis (|v| at least v_max / 2): receiver noise is white over Doppler,
+    while the faint returns a simulator lacks (other scatterers of a moving hand) crowd the slow speeds
+    and would read as noise. Receiver noise is speckle, exponential in power: with mean power m times
+    the floor F, a pixel shows u = max(0, 10 log10(X / F)) / range, and E[range u] = (10 / ln 10)
+    E1(1 / m) (E1 the exponential integral), increasing in m; the level is 10 log10 m at which that
+    equals the mean of those pixels. Where none of the row's n such pixels is above the floor the noise
+    is below it, and the level is its bound there, 10 log10(1 / ln n) (one pixel above the floor
+    expected), so such rows keep their noise hidden; NaN where no such pixel is left: unknown."""
+    n_doppler = simulated.shape[1]
+    outer = np.abs(np.arange(n_doppler) - n_doppler // 2) >= n_doppler // 4
+    floor = (simulated <= 0.0) & outer[None, :, None]
     n = floor.sum(axis=(1, 2))
     shown = np.where(floor, measured, 0.0).sum(axis=(1, 2)) * dynamic_range_db / np.maximum(n, 1)  # mean dB above F
     level = np.interp(shown, _SPECKLE_MEAN_DB, _SPECKLE_LEVEL_DB)
-    return np.where((n > 0) & (shown > _SPECKLE_MEAN_DB[0]), level, np.nan)
+    bound = -10.0 * np.log10(np.log(np.maximum(n, 3)))  # P(X > F) = exp(-1 / m): n exp(-1 / m) = 1
+    hidden = (n > 0) & (shown <= _SPECKLE_MEAN_DB[0])
+    level = np.where(hidden, bound, np.maximum(level, bound))
+    return np.where(n > 0, level, np.nan), hidden
 
 
 # E[max(0, 10 log10 X)] for exponential X of mean 10^(L / 10), tabulated over the level L (dB): increasing

@@ -46,7 +46,7 @@ def _calibration(cal: dict | None) -> str:
         pct = floor["level_db_percentiles"]
         spread = f" (10/50/90 %: {', '.join(f'{v:+.1f}' for v in pct)} dB over the display floor)" if pct else ""
         text += (f"; a noise effect follows each row's measured floor, observable in {floor['rows_observed']} "
-                 f"rows{spread}")
+                 f"rows{spread}, below the display floor in {floor.get('rows_below_floor', 0)}")
     return text
 
 
