@@ -264,7 +264,7 @@ class _Broken(Effect):
     params = {"level": Param(1.0, 0.0, 2.0, (0.5, 1.5))}
     fit = "grid"
 
-    def apply_signal(self, signal, radar, chain):
+    def apply_signal(self, signal, radar, chain, power_scale=None):
         return signal * float("nan")
 
 

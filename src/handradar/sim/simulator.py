@@ -291,33 +291,47 @@ class Simulator(nn.Module):
 
         A stochastic signal effect with ``draws`` > 1 (noise) is drawn that many times and the chain's
         power averaged before dB; with ``draws`` = 0 its expected power is added in closed form
-        (``expected_power``, the limit of many draws): the expected spectrogram either way. With
-        coherence c < 1, ``slot_power`` (:meth:`slot_power` of the slots summed into ``signal``)
-        replaces the share 1 - c of the signal's own power: c |S|^2 + (1 - c) sum |s_k|^2 (+ noise)."""
+        (``expected_power``, the limit of many draws): the expected spectrogram either way.
+
+        With coherence c < 1, ``slot_power`` (:meth:`slot_power` of the slots summed into ``signal``)
+        replaces the share 1 - c of the signal's own power. A signal effect's addition n (noise, the only
+        signal effect, adds to the signal) has a phase unrelated to the slots', so the power shown is
+        c |S + n|^2 + (1 - c)(sum |s_k|^2 + |n|^2): expected value c |S|^2 + (1 - c) sum |s_k|^2 + |n|^2,
+        and never negative in a draw (the cross term 2 Re(S n*) of |S + n|^2 alone can exceed the rest
+        where the slots' own power is small). The noise's SNR is relative to that shown power: its level
+        is scaled by the shown total over |S|^2's, row by row."""
+        c = self.coherence
+        scale = None
+        if c < 1.0:
+            if slot_power is None:
+                raise ValueError("coherence < 1 needs the slots' own power: Simulator.render, or spectrogram(signal, "
+                                 "slot_power(...))")
+            own = profile_power(signal, self.chain)
+            shown = c * own + (1.0 - c) * slot_power.to(own.dtype)
+            total = own.sum(dim=(-2, -1))
+            scale = torch.where(total > 0, shown.sum(dim=(-2, -1)) / total.clamp_min(1e-30), torch.ones_like(total))
         stage = self._stage("signal")
         drawn = [e for e in stage if getattr(e, "draws", 1) > 0]
         draws = max([e.draws for e in drawn if hasattr(e, "draws")] + [1])
-        own = None  # the summed signal's own power, if computed
+        s = signal
         if drawn:
             power = 0.0
             for _ in range(draws):
                 s = signal
                 for e in drawn:
-                    s = e.apply_signal(s, self.radar, self.chain)
-                power = power + profile_power(s, self.chain)
+                    s = e.apply_signal(s, self.radar, self.chain, scale)
+                if c < 1.0:
+                    power = power + c * profile_power(s, self.chain) + (1.0 - c) * profile_power(s - signal, self.chain)
+                else:
+                    power = power + profile_power(s, self.chain)
             power = power / draws
+            if c < 1.0:
+                power = power + (1.0 - c) * slot_power.to(power.dtype)
         else:
-            s = signal
-            power = own = profile_power(signal, self.chain)
+            power = shown if c < 1.0 else profile_power(signal, self.chain)
         for e in stage:
             if e not in drawn:  # after the drawn ones (noise, order 80, is the last signal effect)
-                power = power + e.expected_power(s, self.radar, self.chain)
-        if self.coherence < 1.0:
-            if slot_power is None:
-                raise ValueError("coherence < 1 needs the slots' own power: Simulator.render, or spectrogram(signal, "
-                                 "slot_power(...))")
-            own = profile_power(signal, self.chain) if own is None else own
-            power = power + (1.0 - self.coherence) * (slot_power.to(power.dtype) - own)
+                power = power + e.expected_power(s, self.radar, self.chain, scale)
         return power_to_unit(spread_doppler(power, self.doppler_spread), self.chain)
 
     def render(self, slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, *,

@@ -17,7 +17,7 @@ Contract of an effect (handradar.sim.effects.base.Effect):
   documented grid (Cartesian product of the per-parameter grids, at most a dozen points; a
   parameter's values replaced by ``overrides[param]``); ``Cls.defaults()``.
 - hooks (one overridden per effect): ``apply_skeleton(positions, mask, times)``,
-  ``apply_scatterers(scatterers, ctx)``, ``apply_signal(signal, radar, chain)``.
+  ``apply_scatterers(scatterers, ctx)``, ``apply_signal(signal, radar, chain, power_scale)``.
 
 | name | stage | enters as | parameters (default; bounds) |
 |---|---|---|---|

@@ -141,8 +141,11 @@ class Effect(nn.Module):
         """Reflection points at the skeleton steps -> reflection points (added or re-scaled)."""
         return scat
 
-    def apply_signal(self, signal: torch.Tensor, radar: RadarConfig, chain: ChainConfig) -> torch.Tensor:
-        """Summed per-range-bin slow-time signal (B, frames, loops, channels, bins) -> the same."""
+    def apply_signal(self, signal: torch.Tensor, radar: RadarConfig, chain: ChainConfig,
+                     power_scale: torch.Tensor | None = None) -> torch.Tensor:
+        """Summed per-range-bin slow-time signal (B, frames, loops, channels, bins) -> the same.
+        ``power_scale`` (B,): the power the chain will show over the summed signal's own (the
+        simulator's coherence below 1), for effects whose level is set relative to the signal's."""
         return signal
 
 

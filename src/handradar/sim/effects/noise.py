@@ -90,11 +90,15 @@ class Noise(Effect):
     def reset_rng(self) -> None:
         self.generator = torch.Generator().manual_seed(self.seed)
 
-    def noise_power(self, signal: torch.Tensor) -> torch.Tensor:
+    def noise_power(self, signal: torch.Tensor, power_scale: torch.Tensor | None = None) -> torch.Tensor:
         """(B, 1, 1, 1, 1): the noise power per range bin and chirp, P_signal / 10^(snr / 10), snr =
-        snr_db (+ ``snr_offset_db`` of each example, if set)."""
+        snr_db (+ ``snr_offset_db`` of each example, if set). P_signal is the summed signal's mean power
+        after clutter removal, times ``power_scale`` (B,) if given: the SNR is relative to the power the
+        chain shows (Simulator coherence)."""
         dyn = signal - signal.mean(dim=(-4, -3), keepdim=True)
         p_sig = (dyn.real**2 + dyn.imag**2).mean(dim=(-4, -3, -2, -1), keepdim=True).detach()
+        if power_scale is not None:
+            p_sig = p_sig * power_scale.detach().to(p_sig.dtype).reshape(-1, 1, 1, 1, 1)
         snr = self.value("snr_db").to(p_sig.dtype)
         if self.snr_offset_db is not None:
             if self.snr_offset_db.shape != (signal.shape[0],):
@@ -103,16 +107,18 @@ class Noise(Effect):
             snr = snr + self.snr_offset_db.to(p_sig.dtype).reshape(-1, 1, 1, 1, 1)
         return p_sig / 10.0 ** (snr / 10.0)
 
-    def expected_power(self, signal: torch.Tensor, radar, chain) -> torch.Tensor:
+    def expected_power(self, signal: torch.Tensor, radar, chain, power_scale: torch.Tensor | None = None
+                       ) -> torch.Tensor:
         """E[profile_power(noise)] (B, doppler, 1), the same in every column; added to the signal's
         own power it is the expected power of signal + noise exactly (the cross terms have zero mean)."""
         f, l, ch, bins = signal.shape[-4:]
-        return white_noise_power(self.noise_power(signal).reshape(-1), chain, f * l, ch, bins)[..., None]
+        level = self.noise_power(signal, power_scale).reshape(-1)
+        return white_noise_power(level, chain, f * l, ch, bins)[..., None]
 
-    def apply_signal(self, signal, radar, chain):
+    def apply_signal(self, signal, radar, chain, power_scale=None):
         real = signal.real.dtype
         w2 = float((window(chain.range_window, radar.n_samples, dtype=torch.float64) ** 2).sum())
-        sigma = torch.sqrt(self.noise_power(signal) / w2)
+        sigma = torch.sqrt(self.noise_power(signal, power_scale) / w2)
         shape = (signal.shape[0], signal.shape[1], radar.chirps_per_frame, radar.n_rx, radar.n_samples)
         noise = unit_noise(self.generator, shape, real, radar, chain).to(signal.device)  # (B, F, L, Ch, bins)
         return signal + sigma.to(real) * noise
