@@ -541,9 +541,10 @@ class _Steps:
 
     def noise_floor(self) -> dict | None:
         """With ``noise_floor``: each row's measured noise floor (handradar.gap.fit.measured_floor_db,
-        read where the paper's noise-free baseline shows nothing, at the outer Doppler half's speeds), which every noise effect of the
-        diagnosis then follows through per-row SNR offsets (RowSet.snr_offset_db); its summary for the
-        report. A per-row reading of the measurement, not a fit: the same in every fold."""
+        read where the paper's noise-free baseline shows nothing, at the outer Doppler half's speeds),
+        which every noise effect of the diagnosis then follows through per-row SNR offsets
+        (RowSet.snr_offset_db); its summary for the report. A per-row reading of the measurement, not a
+        fit: the same in every fold."""
         rows = self.data.rows
         rows.snr_offset_db = None
         if not self.cfg.noise_floor:
