@@ -16,6 +16,7 @@ from handradar.radar.chain import (
     profile_power,
     range_profiles_from_adc,
     spectrogram_from_profiles,
+    white_noise_power,
 )
 from handradar.radar.signal import beat_signal
 from handradar.sim.cache import pack
@@ -390,10 +391,8 @@ def test_coherence_is_the_expected_power_over_unknown_slot_phases(radar, short_c
 def test_noise_under_coherence_below_one(radar, short_chain):
     """Below coherence 1 the noise's SNR is relative to the power shown (its level scaled by the shown
     total over |S|^2's), and a drawn noise is unrelated in phase to the slots: the power of a draw is
-    c |S + n|^2 + (1 - c)(sum |s_k|^2 + |n|^2), never negative, where at c = 0 |S + n|^2 - |S|^2 + sum |s_k|^2 (the
-    noise-free rule with the draw's cross term kept whole) goes negative."""
-    from handradar.radar.chain import white_noise_power
-
+    c |S + n|^2 + (1 - c)(sum |s_k|^2 + |n|^2), never negative, where at c = 0 |S + n|^2 - |S|^2 +
+    sum |s_k|^2 (the noise-free rule with the draw's cross term kept whole) goes negative."""
     t = window_times(radar, short_chain)
     pos, mask = window(t, hands=2, seed=5)
     sk, mk = torch.as_tensor(pos[None]).double(), torch.as_tensor(mask[None])
@@ -404,7 +403,8 @@ def test_noise_under_coherence_below_one(radar, short_chain):
         signal, slots = closed.combine(prof), closed.slot_power(prof)
         own = profile_power(signal, short_chain)
         shown = c * own + (1.0 - c) * slots
-        level = closed.effect("noise").noise_power(signal) * float(shown.sum() / own.sum())
+        ratio = float(shown.sum() / own.sum())
+        level = closed.effect("noise").noise_power(signal) * ratio
         f, l, ch, bins = signal.shape[-4:]
         floor = white_noise_power(level.reshape(-1), short_chain, f * l, ch, bins)[..., None]
         torch.testing.assert_close(closed.render(prof), power_to_unit(shown + floor, short_chain), atol=1e-6, rtol=0)
@@ -414,7 +414,7 @@ def test_noise_under_coherence_below_one(radar, short_chain):
         noise = drawn.effect("noise")
         got = drawn.render(prof)
         noise.reset_rng()
-        noisy = noise.apply_signal(signal, radar, short_chain, torch.tensor([float(shown.sum() / own.sum())]))
+        noisy = noise.apply_signal(signal, radar, short_chain, torch.tensor([ratio]))
         whole, alone = profile_power(noisy, short_chain), profile_power(noisy - signal, short_chain)
         if c == 0.0:  # the defect this rule avoids
             assert (whole - (own - slots)).min() < 0.0

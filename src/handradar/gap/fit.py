@@ -186,7 +186,8 @@ def measured_floor_db(measured: np.ndarray, simulated: np.ndarray,
     n = floor.sum(axis=(1, 2))
     shown = np.where(floor, measured, 0.0).sum(axis=(1, 2)) * dynamic_range_db / np.maximum(n, 1)  # mean dB above F
     level = np.interp(shown, _SPECKLE_MEAN_DB, _SPECKLE_LEVEL_DB)
-    bound = -10.0 * np.log10(np.log(np.maximum(n, 3)))  # P(X > F) = exp(-1 / m): n exp(-1 / m) = 1
+    # P(X > F) = exp(-1 / m), so n exp(-1 / m) = 1; n >= 3 keeps the bound below the floor (ln n > 1)
+    bound = -10.0 * np.log10(np.log(np.maximum(n, 3)))
     hidden = (n > 0) & (shown <= _SPECKLE_MEAN_DB[0])
     level = np.where(hidden, bound, np.maximum(level, bound))
     return np.where(n > 0, level, np.nan), hidden
