@@ -65,6 +65,10 @@ def test_names_the_effect_and_recovers_its_parameter(radar, short_chain):
     assert 4.5 < top["params"]["q"] < 7.5  # the grid's 4 or 8, refined toward 6
     assert rep["evidence"]["clearly_ahead"] and rep["evidence"]["lead_ci95"][0] > 0
     assert rep["after"]["effects"][0] == "antenna_pattern" and rep["after"]["gap_closed"] > 0.5
+    # the speckle deviance, scored on the same fitted candidates, puts the same effect first
+    sp = rep["evidence"]["speckle"]
+    assert sp["leader"] == "antenna_pattern" and sp["ci95"][0] > 0 and sp["lead_ci95"][0] > 0
+    assert top["speckle"]["deviance"] < rep["baseline"]["speckle_deviance"]
     assert rep["n_calibration"] + rep["n_evaluation"] == 12
     assert set(d.calibration).isdisjoint(d.evaluation)
 
@@ -76,6 +80,8 @@ def test_null_data_give_none(radar, short_chain):
     assert rep["baseline"]["ssim"] == pytest.approx(1.0, abs=1e-4)
     assert rep["cause"] == "none" and rep["after"]["effects"] == []
     assert all(c["gap_closed"] <= 1e-6 for c in rep["candidates"])
+    assert rep["baseline"]["speckle_deviance"] == pytest.approx(0.0, abs=1e-6)  # measured = simulated
+    assert all(c["speckle"]["gap_closed"] <= 1e-6 for c in rep["candidates"])
 
 
 def test_gap_outside_the_vocabulary_names_no_effect(radar, short_chain, tmp_path):

@@ -191,6 +191,8 @@ def score(results: Sequence[Mapping]) -> dict:
             "effects_inconclusive": sum(r["cause"] == "inconclusive" for r in effect_cases),
             "controls_inconclusive": sum(r["cause"] == "inconclusive" for r in controls),
             "mean_true_gap_closed": float(np.mean(closed)) if closed else None,
+            "speckle_first": sum(bool(r.get("speckle")) and r["speckle"]["leader"] == r["truth"] for r in effect_cases),
+            "speckle_clearly_first": sum(speckle_clearly_first(r.get("speckle"), r["truth"]) for r in effect_cases),
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
@@ -309,10 +311,28 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "baseline_ssim": report["baseline"]["ssim"], "after_effects": report["after"]["effects"],
             "after_gap_closed": report["after"]["gap_closed"], "lead_ci95": report["evidence"].get("lead_ci95"),
             "recordings_needed": report["evidence"].get("recordings_needed"),
+            "speckle": _speckle_result(report, case.truth),
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
             # step 0's generic settings and the mean SSIM of each grid point (not the effects' grids)
             "calibration": {k: v for k, v in (report["baseline"].get("calibration") or {}).items()
                             if k not in ("effects", "effect_grids")}}
+
+
+def _speckle_result(report: Mapping, truth: str) -> dict | None:
+    """The candidates ranked by the speckle deviance (evidence.speckle): leader, lead CI, the true effect's rank."""
+    sp = report["evidence"].get("speckle")
+    if not sp or sp.get("leader") is None:
+        return None
+    ranked = sorted(report["candidates"], key=lambda c: c["speckle"]["gap_closed"], reverse=True)
+    names = [c["effect"] for c in ranked]
+    true = ranked[names.index(truth)]["speckle"] if truth in names else None
+    return {**sp, "true_rank": names.index(truth) + 1 if true else None,
+            "true_gap_closed": true["gap_closed"] if true else None, "true_ci95": true["ci95"] if true else None}
+
+
+def speckle_clearly_first(sp: Mapping | None, truth: str) -> bool:
+    """The speckle score puts ``truth`` first, its CI above 0 and its lead's CI above 0."""
+    return bool(sp and sp["leader"] == truth and sp["ci95"][0] > 0 and (sp["lead_ci95"] is None or sp["lead_ci95"][0] > 0))
 
 
 def split_text(diag_cfg: Mapping) -> str:
@@ -331,6 +351,14 @@ def _attributed(r: Mapping) -> str:
     return "inconclusive (no estimate)" if n is None else f"inconclusive (~{n} recordings)"
 
 
+def _speckle_cell(sp: Mapping | None, sgn: Callable[[float], str]) -> str:
+    if not sp:
+        return "-"
+    lead = "" if not sp.get("lead_ci95") else f", [{sgn(sp['lead_ci95'][0])}, {sgn(sp['lead_ci95'][1])}] vs {sp['runner_up']}"
+    rank = "" if sp.get("true_rank") is None else f"; true {sp['true_rank']}"
+    return f"{sp['leader']} ({sgn(sp['gap_closed'])} [{sgn(sp['ci95'][0])}, {sgn(sp['ci95'][1])}]){lead}{rank}"
+
+
 def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, settings: Mapping) -> str:
     sgn = functools.partial(fmt_number, signed=True)  # gap_closed figures carry their sign
     lines = ["# Gap diagnosis benchmark: withheld effects", "",
@@ -345,7 +373,10 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              f"{scores['effects_inconclusive']} of {scores['effects_total']} withheld effects, "
              f"{scores['controls_inconclusive']} of {scores['controls_total']} controls.** "
              f"Mean gap_closed by the withheld effect: {sgn(scores['mean_true_gap_closed'])}; "
-             f"by the greedy selection: {sgn(scores['mean_after_gap_closed'])}.", "",
+             f"by the greedy selection: {sgn(scores['mean_after_gap_closed'])}. "
+             f"Speckle deviance (evidence only, no verdict): the true effect leads in {scores.get('speckle_first', 0)} "
+             f"of {scores['effects_total']}, with its CI and its lead's CI above 0 in "
+             f"{scores.get('speckle_clearly_first', 0)}.", "",
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "over the same window of each recording (mean / median): how visible the withheld effect is in the radar "
              "data at all. `world's change on the simulator` is the gap_closed [95 % CI] of the diagnosis's baseline "
@@ -353,11 +384,14 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              "effect leaves the radar data unchanged): what a candidate reproducing the effect would close on top of "
              "the simulator's generic mismatch, the reference for the true effect's gap_closed; r: the Pearson "
              "correlation, over every pixel, of the true effect's candidate's change with the world's (does the "
-             "candidate change the spectrograms the way the effect does?).", "",
+             "candidate change the spectrograms the way the effect does?). `speckle deviance` ranks the same fitted "
+             "candidates by the speckle deviance instead of 1 - SSIM (handradar.metrics.speckle_deviance: measured power "
+             "as exponential speckle around the simulated expectation): its leader (gap_closed [95 % CI]), the lead's "
+             "CI over its runner-up, and the true effect's rank.", "",
              "| world | truth | attributed cause | correct | gap_closed of the true effect [95 % CI] | rank | "
              "top candidate (gap_closed) | runner-up lead CI | after: effects (gap_closed) | baseline SSIM | "
-             "radar signature | world's change on the simulator |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "radar signature | world's change on the simulator | speckle deviance: leader, lead CI, true rank |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         ci = r["true_ci95"]
         true = "-" if r["true_gap_closed"] is None else f"{sgn(r['true_gap_closed'])} [{sgn(ci[0])}, {sgn(ci[1])}]"
@@ -370,7 +404,7 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
         lines.append(f"| {r['case']} | {r['truth']} | {_attributed(r)} | {'yes' if r['correct'] else 'no'} | {true} | "
                      f"{r['true_rank'] or '-'} | {r['top_candidate']} ({sgn(r['top_gap_closed'])}) | {lead} | "
                      f"{', '.join(r['after_effects']) or '-'} ({sgn(r['after_gap_closed'])}) | "
-                     f"{fmt_number(r['baseline_ssim'])} | {sig} | {ref} |")
+                     f"{fmt_number(r['baseline_ssim'])} | {sig} | {ref} | {_speckle_cell(r.get('speckle'), sgn)} |")
     lines += ["", f"![confusion]({figure})", "",
               f"Settings: {settings.get('rows')} rows per world ({settings.get('split')}), "
               f"{settings.get('fit_rows')} calibration rows score the grid, seed {settings.get('seed')}; "

@@ -30,7 +30,10 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    and the paired bootstrap of its lead over the runner-up excludes 0; "none" when the upper end
    of the leader's CI is below ``min_gap_closed`` (no candidate closes a relevant part of the gap);
    else "inconclusive", with an estimate of the recordings that would decide it
-   (``recordings_needed``, from the CI half-widths scaled by 1/sqrt(rows));
+   (``recordings_needed``, from the CI half-widths scaled by 1/sqrt(rows)). Next to it, as evidence
+   only (``evidence.speckle``, and ``speckle`` per candidate): the same candidates scored by the
+   speckle deviance (handradar.metrics.speckle_deviance), which treats the measured power as speckle
+   around the simulated expectation: its leader, gap_closed and lead over the runner-up;
 4. how far: greedy forward selection from the leader, refitting every remaining candidate on
    calibration given those chosen, while one still closes a significant part of the remaining gap;
    then each chosen effect is refitted given the others; ``after`` is the combined result on the
@@ -112,6 +115,7 @@ from handradar.metrics import (
     gap_closed,
     per_example_mse,
     per_example_ssim,
+    speckle_deviance,
 )
 from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
 from handradar.sim.effects import REGISTRY
@@ -257,6 +261,9 @@ class Candidate:
     signature: float = 0.0
     spectrograms: np.ndarray | None = None  # evaluation rows
     fold_params: list[dict[str, float]] = field(default_factory=list)  # with folds: each fold's fit (scores its rows)
+    deviance: np.ndarray | None = None  # speckle deviance per evaluation row (handradar.metrics)
+    speckle_gap_closed: float = 0.0  # ... its gap_closed against the base's deviance, with its CI
+    speckle_ci95: tuple[float, float] = (0.0, 0.0)
 
     def significant(self, min_gap_closed: float) -> bool:
         return significant(self.gap_closed, self.ci95, min_gap_closed)
@@ -266,6 +273,9 @@ class Candidate:
                "ssim": float(self.ssim.mean()), "mse": float(self.mse.mean()), "gap_closed": float(self.gap_closed),
                "ci95": [float(self.ci95[0]), float(self.ci95[1])], "significant": self.significant(min_gap_closed),
                "signature_correlation": float(self.signature), "fit": self.fit.as_dict()}
+        if self.deviance is not None:
+            out["speckle"] = {"deviance": float(self.deviance.mean()), "gap_closed": float(self.speckle_gap_closed),
+                              "ci95": [float(self.speckle_ci95[0]), float(self.speckle_ci95[1])]}
         if self.fold_params:
             out["fold_params"] = [{k: float(v) for k, v in p.items()} for p in self.fold_params]
         return out
@@ -275,7 +285,7 @@ class Candidate:
         them); gap_closed against ``before_ssim`` (all evaluation rows), no CI."""
         return dataclasses.replace(self, params=params, ssim=self.ssim[pos], mse=self.mse[pos],
                                    gap_closed=float(gap_closed(before_ssim[pos], self.ssim[pos])),
-                                   spectrograms=None, fold_params=[])
+                                   spectrograms=None, fold_params=[], deviance=None)
 
 
 @dataclass
@@ -347,6 +357,10 @@ class _Runner:
         s = torch.as_tensor(spec)
         return per_example_ssim(m, s), per_example_mse(m, s)
 
+    def deviance(self, spec: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """Speckle deviance of ``spec`` against the measured rows ``idx`` (handradar.metrics)."""
+        return speckle_deviance(self.target[idx], spec, self.data.chain.dynamic_range_db)
+
     def fit(self, engine: VariantEngine, names: Sequence[str], fit_idx: np.ndarray, refine_idx: np.ndarray,
             step: str) -> dict[str, GridFit]:
         n_variants = sum(len(effect_grid(n, self.cfg.grids)) for n in names)
@@ -381,6 +395,8 @@ class _Runner:
         *folds, reported = fold_fits
         base_spec = specs[0]
         before = self.scores(base_spec, ev)[0] if before_ssim is None else before_ssim
+        # the deviance as a score (1 - deviance), so that gap_closed and its bootstrap apply (metrics doc)
+        before_dev = 1.0 - self.deviance(base_spec, ev)
         res_map = (self.data.measured[ev] - base_spec).mean(0)
         out = []
         for name, spec in zip(reported, specs[1:]):
@@ -393,10 +409,30 @@ class _Runner:
             ssim, mse = self.scores(spec, ev)
             boot = bootstrap_gap_closed(before, ssim, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
             change = (spec - base_spec).mean(0)
+            dev = self.deviance(spec, ev)
+            speckle = bootstrap_gap_closed(before_dev, 1.0 - dev, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
             out.append(Candidate(name, fit.best, fit, ssim, mse, boot.estimate, boot.ci95,
-                                 signature_correlation(res_map, change), spec, [f[name].best for f in folds]))
+                                 signature_correlation(res_map, change), spec, [f[name].best for f in folds],
+                                 dev, speckle.estimate, speckle.ci95))
         out.sort(key=lambda c: c.gap_closed, reverse=True)
         return base_spec, out
+
+
+def _speckle_evidence(before_dev: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> dict:
+    """The candidates ranked by the speckle deviance instead of SSIM: leader, its gap_closed [CI], and
+    the paired-bootstrap CI of its lead over the runner-up (evidence only: no verdict is drawn from it)."""
+    ranked = sorted(cands, key=lambda c: c.speckle_gap_closed, reverse=True)
+    out: dict = {"leader": None, "gap_closed": None, "ci95": None, "runner_up": None, "lead_ci95": None}
+    if not ranked:
+        return out
+    lead = ranked[0]
+    out.update(leader=lead.effect, gap_closed=float(lead.speckle_gap_closed),
+               ci95=[float(lead.speckle_ci95[0]), float(lead.speckle_ci95[1])])
+    if len(ranked) > 1:
+        _, ci = bootstrap_difference(1.0 - before_dev, 1.0 - lead.deviance, 1.0 - ranked[1].deviance,
+                                     n_boot=cfg.n_boot, seed=cfg.seed)
+        out.update(runner_up=ranked[1].effect, lead_ci95=[float(ci[0]), float(ci[1])])
+    return out
 
 
 def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> tuple[str, dict]:
@@ -606,9 +642,11 @@ class _Steps:
         self.base_spec, self.cands = self.crossfit([f.base for f in self.folds], self.names, None, "step 1",
                                                    on_base=keep_power, cached=True)
         self.before_ssim, self.before_mse = self.runner.scores(self.base_spec, self.ev)
+        self.before_deviance = self.runner.deviance(self.base_spec, self.ev)
         self.bones.add(torch.stack([powers[int(r)] for r in self.ev]), d.measured[self.ev] - self.base_spec,
                        self.base_spec)
         self.cause, self.evidence = _evidence(self.before_ssim, self.cands, cfg)
+        self.evidence["speckle"] = _speckle_evidence(self.before_deviance, self.cands, cfg)
 
     def how_far(self) -> None:
         """Greedy forward selection from the leader while a candidate still closes a significant part;
@@ -666,6 +704,7 @@ class _Steps:
         self.report = {"format": FORMAT, "n_calibration": int(min(len(f.train) for f in self.scored)),
                        "n_evaluation": int(len(ev)),
                        "baseline": {"ssim": float(self.before_ssim.mean()), "mse": float(self.before_mse.mean()),
+                                    "speckle_deviance": float(self.before_deviance.mean()),
                                     "effects": {k: self.base_sim.effect(k).values() for k in self.base},
                                     "calibration": self.calibration},
                        "where": where,

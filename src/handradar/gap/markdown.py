@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 from handradar.runs.tables import fmt_number
@@ -136,6 +137,15 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
                     if ev.get("runner_up") else "no runner-up")
             lines += [f"Evidence: leader {ev['leader']} (significant: {'yes' if ev['leader_significant'] else 'no'}), "
                       f"{lead} (clearly ahead: {'yes' if ev['clearly_ahead'] else 'no'}).", ""]
+        sp = ev.get("speckle") or {}
+        if sp.get("leader"):
+            sg = functools.partial(fmt_number, signed=True)
+            lead = (f", its lead over {sp['runner_up']} [{sg(sp['lead_ci95'][0])}, {sg(sp['lead_ci95'][1])}]"
+                    if sp.get("runner_up") else "")
+            lines += [f"Speckle deviance (evidence only, handradar.metrics.speckle_deviance: the measured power as "
+                      f"speckle around the simulated expectation; baseline {fmt_number(base['speckle_deviance'])}): "
+                      f"leader {sp['leader']}, gap_closed {sg(sp['gap_closed'])} [{sg(sp['ci95'][0])}, "
+                      f"{sg(sp['ci95'][1])}]{lead}.", ""]
     for key in ("candidates", "signatures"):
         if key in rel:
             lines += [f"![{key}]({rel[key]})", ""]
