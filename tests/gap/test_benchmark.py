@@ -196,6 +196,10 @@ def test_benchmark_runs_scores_and_resumes(tmp_path, radar, short_chain):
     # the gap; the control has no change to add
     assert by["antenna_pattern"]["reference_ci95"][0] > 0.5 and by["nothing"].get("reference_gap_closed") is None
     assert by["antenna_pattern"]["change_correlation"] > 0.5  # the fitted candidate is the world's own effect
+    # the speckle deviance's ranking, evidence beside the verdict: the world's own effect leads there too
+    sp = by["antenna_pattern"]["speckle"]
+    assert sp["leader"] == "antenna_pattern" and sp["true_rank"] == 1 and sp["ci95"][0] > 0
+    assert out["scores"]["speckle_first"] == 1 and "speckle deviance: leader, lead CI, true rank" in md.read_text()
     CALLS.clear()
     md.write_text(md.read_text() + "hand-written analysis\n")
     run_benchmark(cfg, tmp_path / "run2")  # every case resumes from the state folder: no world is built
