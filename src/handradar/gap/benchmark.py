@@ -192,7 +192,7 @@ def score(results: Sequence[Mapping]) -> dict:
             "controls_inconclusive": sum(r["cause"] == "inconclusive" for r in controls),
             "mean_true_gap_closed": float(np.mean(closed)) if closed else None,
             "speckle_first": sum(bool(r.get("speckle")) and r["speckle"]["leader"] == r["truth"] for r in effect_cases),
-            "speckle_clearly_first": sum(speckle_clearly_first(r.get("speckle"), r["truth"]) for r in effect_cases),
+            "speckle_clearly_first": sum(_speckle_clearly_first(r.get("speckle"), r["truth"]) for r in effect_cases),
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
@@ -330,7 +330,7 @@ def _speckle_result(report: Mapping, truth: str) -> dict | None:
             "true_gap_closed": true["gap_closed"] if true else None, "true_ci95": true["ci95"] if true else None}
 
 
-def speckle_clearly_first(sp: Mapping | None, truth: str) -> bool:
+def _speckle_clearly_first(sp: Mapping | None, truth: str) -> bool:
     """The speckle score puts ``truth`` first, its CI above 0 and its lead's CI above 0."""
     return bool(sp and sp["leader"] == truth and sp["ci95"][0] > 0 and (sp["lead_ci95"] is None or sp["lead_ci95"][0] > 0))
 

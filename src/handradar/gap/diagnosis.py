@@ -396,7 +396,7 @@ class _Runner:
         base_spec = specs[0]
         before = self.scores(base_spec, ev)[0] if before_ssim is None else before_ssim
         # the deviance as a score (1 - deviance), so that gap_closed and its bootstrap apply (metrics doc)
-        before_dev = 1.0 - self.deviance(base_spec, ev)
+        before_score = 1.0 - self.deviance(base_spec, ev)
         res_map = (self.data.measured[ev] - base_spec).mean(0)
         out = []
         for name, spec in zip(reported, specs[1:]):
@@ -410,7 +410,7 @@ class _Runner:
             boot = bootstrap_gap_closed(before, ssim, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
             change = (spec - base_spec).mean(0)
             dev = self.deviance(spec, ev)
-            speckle = bootstrap_gap_closed(before_dev, 1.0 - dev, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
+            speckle = bootstrap_gap_closed(before_score, 1.0 - dev, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
             out.append(Candidate(name, fit.best, fit, ssim, mse, boot.estimate, boot.ci95,
                                  signature_correlation(res_map, change), spec, [f[name].best for f in folds],
                                  dev, speckle.estimate, speckle.ci95))
@@ -418,7 +418,7 @@ class _Runner:
         return base_spec, out
 
 
-def _speckle_evidence(before_dev: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> dict:
+def _speckle_evidence(before_deviance: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> dict:
     """The candidates ranked by the speckle deviance instead of SSIM: leader, its gap_closed [CI], and
     the paired-bootstrap CI of its lead over the runner-up (evidence only: no verdict is drawn from it)."""
     ranked = sorted(cands, key=lambda c: c.speckle_gap_closed, reverse=True)
@@ -429,7 +429,7 @@ def _speckle_evidence(before_dev: np.ndarray, cands: list[Candidate], cfg: Diagn
     out.update(leader=lead.effect, gap_closed=float(lead.speckle_gap_closed),
                ci95=[float(lead.speckle_ci95[0]), float(lead.speckle_ci95[1])])
     if len(ranked) > 1:
-        _, ci = bootstrap_difference(1.0 - before_dev, 1.0 - lead.deviance, 1.0 - ranked[1].deviance,
+        _, ci = bootstrap_difference(1.0 - before_deviance, 1.0 - lead.deviance, 1.0 - ranked[1].deviance,
                                      n_boot=cfg.n_boot, seed=cfg.seed)
         out.update(runner_up=ranked[1].effect, lead_ci95=[float(ci[0]), float(ci[1])])
     return out
