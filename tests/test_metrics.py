@@ -76,9 +76,9 @@ def test_speckle_deviance_closed_forms():
     # exponential speckle around the expectation: E[log E] = -gamma, E[E] = 1, so gamma per row
     measured = expectation * rng.exponential(size=expectation.shape)
     measured = measured / measured.max(axis=(1, 2), keepdims=True)
-    keep = measured > 10 ** (-range_db / 10.0)  # the closed form needs every pixel above the floor
-    assert keep.mean() > 0.999
-    d = speckle_deviance(to_unit(np.maximum(measured, 10 ** (-range_db / 10.0))), sim, range_db)
+    floor = 10 ** (-range_db / 10.0)  # the display floor's power
+    assert (measured > floor).mean() > 0.999  # the closed form needs (nearly) every pixel above it
+    d = speckle_deviance(to_unit(np.maximum(measured, floor)), sim, range_db)
     assert np.allclose(d, np.euler_gamma, atol=0.05)  # 3.5 sd of a row's mean log over 8192 pixels
     # asymmetric: a bright pixel the simulation lacks (10 dB above it) costs more than 10 dB too much
     base = np.full((1, 8, 8), 0.5)

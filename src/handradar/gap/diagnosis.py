@@ -261,7 +261,7 @@ class Candidate:
     signature: float = 0.0
     spectrograms: np.ndarray | None = None  # evaluation rows
     fold_params: list[dict[str, float]] = field(default_factory=list)  # with folds: each fold's fit (scores its rows)
-    deviance: np.ndarray | None = None  # speckle deviance per evaluation row (handradar.metrics)
+    deviance: np.ndarray | None = None  # step 1: speckle deviance per evaluation row (handradar.metrics)
     speckle_gap_closed: float = 0.0  # ... its gap_closed against the base's deviance, with its CI
     speckle_ci95: tuple[float, float] = (0.0, 0.0)
 
@@ -395,8 +395,6 @@ class _Runner:
         *folds, reported = fold_fits
         base_spec = specs[0]
         before = self.scores(base_spec, ev)[0] if before_ssim is None else before_ssim
-        # the deviance as a score (1 - deviance), so that gap_closed and its bootstrap apply (metrics doc)
-        before_score = 1.0 - self.deviance(base_spec, ev)
         res_map = (self.data.measured[ev] - base_spec).mean(0)
         out = []
         for name, spec in zip(reported, specs[1:]):
@@ -409,22 +407,26 @@ class _Runner:
             ssim, mse = self.scores(spec, ev)
             boot = bootstrap_gap_closed(before, ssim, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
             change = (spec - base_spec).mean(0)
-            dev = self.deviance(spec, ev)
-            speckle = bootstrap_gap_closed(before_score, 1.0 - dev, n_boot=self.cfg.n_boot, seed=self.cfg.seed)
             out.append(Candidate(name, fit.best, fit, ssim, mse, boot.estimate, boot.ci95,
-                                 signature_correlation(res_map, change), spec, [f[name].best for f in folds],
-                                 dev, speckle.estimate, speckle.ci95))
+                                 signature_correlation(res_map, change), spec, [f[name].best for f in folds]))
         out.sort(key=lambda c: c.gap_closed, reverse=True)
         return base_spec, out
 
 
-def _speckle_evidence(before_deviance: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> dict:
-    """The candidates ranked by the speckle deviance instead of SSIM: leader, its gap_closed [CI], and
-    the paired-bootstrap CI of its lead over the runner-up (evidence only: no verdict is drawn from it)."""
+def _speckle_evidence(runner: _Runner, base_spec: np.ndarray, cands: list[Candidate], ev: np.ndarray,
+                      cfg: DiagnosisConfig) -> tuple[np.ndarray, dict]:
+    """Step 1's candidates scored by the speckle deviance instead of SSIM (each candidate's deviance,
+    gap_closed and CI set in place): the baseline's deviance per row, and the evidence: leader, its
+    gap_closed [CI], the paired-bootstrap CI of its lead over the runner-up (no verdict is drawn from it)."""
+    before_deviance = runner.deviance(base_spec, ev)
+    for c in cands:  # the deviance as a score (1 - deviance), so that gap_closed and its bootstrap apply
+        c.deviance = runner.deviance(c.spectrograms, ev)
+        boot = bootstrap_gap_closed(1.0 - before_deviance, 1.0 - c.deviance, n_boot=cfg.n_boot, seed=cfg.seed)
+        c.speckle_gap_closed, c.speckle_ci95 = boot.estimate, boot.ci95
     ranked = sorted(cands, key=lambda c: c.speckle_gap_closed, reverse=True)
     out: dict = {"leader": None, "gap_closed": None, "ci95": None, "runner_up": None, "lead_ci95": None}
     if not ranked:
-        return out
+        return before_deviance, out
     lead = ranked[0]
     out.update(leader=lead.effect, gap_closed=float(lead.speckle_gap_closed),
                ci95=[float(lead.speckle_ci95[0]), float(lead.speckle_ci95[1])])
@@ -432,7 +434,7 @@ def _speckle_evidence(before_deviance: np.ndarray, cands: list[Candidate], cfg: 
         _, ci = bootstrap_difference(1.0 - before_deviance, 1.0 - lead.deviance, 1.0 - ranked[1].deviance,
                                      n_boot=cfg.n_boot, seed=cfg.seed)
         out.update(runner_up=ranked[1].effect, lead_ci95=[float(ci[0]), float(ci[1])])
-    return out
+    return before_deviance, out
 
 
 def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> tuple[str, dict]:
@@ -642,11 +644,11 @@ class _Steps:
         self.base_spec, self.cands = self.crossfit([f.base for f in self.folds], self.names, None, "step 1",
                                                    on_base=keep_power, cached=True)
         self.before_ssim, self.before_mse = self.runner.scores(self.base_spec, self.ev)
-        self.before_deviance = self.runner.deviance(self.base_spec, self.ev)
         self.bones.add(torch.stack([powers[int(r)] for r in self.ev]), d.measured[self.ev] - self.base_spec,
                        self.base_spec)
         self.cause, self.evidence = _evidence(self.before_ssim, self.cands, cfg)
-        self.evidence["speckle"] = _speckle_evidence(self.before_deviance, self.cands, cfg)
+        self.before_deviance, self.evidence["speckle"] = _speckle_evidence(self.runner, self.base_spec, self.cands,
+                                                                            self.ev, cfg)
 
     def how_far(self) -> None:
         """Greedy forward selection from the leader while a candidate still closes a significant part;
