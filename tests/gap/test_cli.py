@@ -11,13 +11,16 @@ from pathlib import Path
 
 import pytest
 from hydra import compose, initialize_config_dir
+from hydra.core.hydra_config import HydraConfig
 from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
 from handradar.config import VERSION_BASE, config_dir
 from handradar.data.datasets import ReferenceWorld
 from handradar.errors import FormatError
+from handradar.gap.benchmark import OUTPUT_KEYS
 from handradar.gap.report import fitted_simulator, validate_report
+from handradar.runs.hydra import command_line
 from handradar.sim.factory import SimFactory
 from tests.data.writer import Scene, write_recording
 from tests.tasks.fakes import compose_train
@@ -28,6 +31,22 @@ REPO = Path(__file__).resolve().parents[2]
 def _compose(overrides):
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
         return compose("diagnose", overrides=overrides, return_hydra_config=False)
+
+
+def test_benchmark_names_the_command_that_reproduces_it_without_output_locations():
+    """The results file's command: the job's overrides as typed (shell-quoted), minus where outputs go."""
+    assert command_line("diagnose.py", OUTPUT_KEYS) is None  # outside a Hydra job
+    overrides = ["+experiment=gap_benchmark_heldout2", "diagnose.noise_floor=true", "diagnose.coherences=[1.0,0.5]",
+                 "benchmark.state_dir=/tmp/st", "benchmark.results_md=/tmp/r.md", "progress=false"]
+    with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
+        cfg = compose("diagnose", overrides=overrides, return_hydra_config=True)
+    HydraConfig.instance().set_config(cfg)
+    try:
+        cmd = command_line("diagnose.py", OUTPUT_KEYS)
+    finally:
+        HydraConfig.instance().cfg = None  # other tests run outside a Hydra job
+    assert cmd == ("python diagnose.py +experiment=gap_benchmark_heldout2 diagnose.noise_floor=true "
+                   "'diagnose.coherences=[1.0,0.5]'")
 
 
 def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chain):

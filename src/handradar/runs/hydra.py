@@ -1,6 +1,7 @@
-"""Hydra job helpers: the job's output folder and a callback that reports every job of a multirun.
+"""Hydra job helpers: the job's output folder, its command line and a callback that reports every job of a multirun.
 
-:func:`output_dir` is the folder Hydra made for the running job. :class:`JobReport`: Hydra's launchers already run the remaining jobs when one raises (the exception is stored in the
+:func:`output_dir` is the folder Hydra made for the running job, :func:`command_line` the command
+that reproduces it. :class:`JobReport`: Hydra's launchers already run the remaining jobs when one raises (the exception is stored in the
 job's return); this callback makes the outcome visible: each job appends a line to
 ``<sweep dir>/jobs.jsonl`` (number, overrides, status, run dir, error) as it ends, in its own
 process (so joblib and SLURM workers report too), and the end of the multirun prints a summary
@@ -13,6 +14,8 @@ from __future__ import annotations
 import atexit
 import json
 import logging
+import shlex
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -76,3 +79,15 @@ def output_dir() -> Path:
     from hydra.core.hydra_config import HydraConfig
 
     return Path(HydraConfig.get().runtime.output_dir)
+
+
+def command_line(script: str, skip: Iterable[str] = ()) -> str | None:
+    """``python SCRIPT`` with the running Hydra job's command-line overrides, shell-quoted; overrides of a
+    key in ``skip`` (e.g. where outputs go) are left out. None outside a Hydra job (nothing to tell)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    if not HydraConfig.initialized():
+        return None
+    skip = set(skip)
+    kept = [o for o in HydraConfig.get().overrides.task if o.split("=", 1)[0].lstrip("+~") not in skip]
+    return " ".join(["python", script, *map(shlex.quote, kept)])
