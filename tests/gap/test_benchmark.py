@@ -239,3 +239,26 @@ def test_candidate_scan_credits_the_worlds_own_change(tmp_path, radar, short_cha
     on_clean = scan(clean_own, None, {}, variants[:1], exponent=0.5)
     assert np.isfinite(on_clean[0]["gap_closed"]) and "r" not in on_clean[0]
 
+
+
+def test_causes_named_by_specificity_are_counted_and_marked():
+    """Rows whose leader specificity_decides names (on or off) are counted, right or wrong, and a cause
+    it named carries the mark in the table."""
+    res = [{"case": "occlusion", "truth": "occlusion", "cause": "occlusion", "correct": True, "decided_by": "specificity",
+            "leader": "occlusion", "specific_lead": True},
+           {"case": "palm", "truth": "palm", "cause": "inconclusive", "correct": False, "leader": "noise",
+            "specific_lead": True, "recordings_needed": 90},
+           {"case": "forearm", "truth": "forearm", "cause": "forearm", "correct": True, "decided_by": "lead",
+            "leader": "forearm", "specific_lead": False},
+           {"case": "nothing", "truth": "none", "cause": "none", "correct": True, "leader": "noise", "specific_lead": False}]
+    for r in res:
+        r.update(true_gap_closed=None if r["truth"] == "none" else 0.03, after_gap_closed=0.0, true_ci95=[0.0, 0.06],
+                 true_rank=1, top_candidate=r["leader"], top_gap_closed=0.03, lead_ci95=None, after_effects=[],
+                 baseline_ssim=0.9)
+    s = score(res)
+    assert (s["specificity_named"], s["specificity_right"]) == (2, 1)
+    md = results_markdown(res, s, "gap_confusion.png", {"specificity_decides": True})
+    assert "| occlusion | occlusion | occlusion (by specificity) | yes |" in md
+    assert "| forearm | forearm | forearm | yes |" in md
+    assert "(`diagnose.specificity_decides`, on): a relevant leader not clearly ahead, its gain specific and the " \
+           "runner-up's not, in 2 rows, the right answer in 1" in md

@@ -75,8 +75,12 @@ def _assert_same(got, want, where: str = "report", rel: float = FLOAT_TOL["rel"]
 def test_one_fold_is_the_single_split_number_for_number(radar, short_chain):
     got = json.loads(json.dumps(_comparable(single_split_run(radar, short_chain, folds=1).report)))
     want = json.loads(GOLDEN.read_text())
-    # the keys added since the golden report: folds, the candidates' specificity and speckle evidence
+    # the keys added since the golden report: folds, the candidates' specificity and speckle evidence,
+    # what specificity says of the leader (it named nothing: the leader was clearly ahead)
     assert got["settings"].pop("folds") == 1
+    assert got["evidence"].pop("decided_by") == "lead" and got["evidence"]["clearly_ahead"]
+    for key in ("leader_specific", "runner_up_specific", "specific_lead"):
+        got["evidence"].pop(key)
     for c in got["candidates"]:
         c.pop("specificity", None)
         c.pop("speckle")

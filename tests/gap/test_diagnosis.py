@@ -380,3 +380,38 @@ def test_decide_gives_no_estimate_beyond_a_hundred_times_the_rows(lead, rows):
     v = decide("multipath", 0.05, (0.03, 0.07), lead, (lead - 0.015, lead + 0.015), **DECIDE)
     assert v["cause"] == "inconclusive" and v["evaluation_rows_needed"] == rows
     assert ("tied at any practical size" in v["decides"]) == (rows is None)
+
+
+def test_specificity_separates_a_relevant_leader_from_an_unspecific_runner_up():
+    """``specificity_decides``: a significant, relevant leader whose lead over the runner-up is not
+    significant is named when its gain is specific and the runner-up's is not; not when the runner-up's
+    is specific too, nor when the leader is not relevant. Off (the default), the verdict is unchanged
+    and the evidence still says what the setting would do."""
+    rng = np.random.default_rng(1)
+    before = rng.uniform(0.8, 0.9, 120)
+    gap = 1.0 - before
+
+    def cand(name: str, closed: float, specific: bool | None) -> Candidate:
+        ssim = before + closed * gap + rng.normal(0.0, 0.01, before.shape)  # per-row scatter: a tied lead
+        sp = None if specific is None else {"factor": "f", "contrast": 0.01, "ci95": [0.005 if specific else -0.005, 0.02],
+                                             "specific": specific}
+        return Candidate(name, {}, GridFit(name, [], []), ssim, np.zeros_like(ssim), closed,
+                         (0.6 * closed, 1.4 * closed), specificity=sp)
+
+    occl, noise = cand("occlusion", 0.05, True), cand("noise", 0.045, False)
+    cause, ev = _evidence(before, [occl, noise], DiagnosisConfig(n_boot=300))
+    assert not ev["clearly_ahead"] and ev["leader_significant"]  # the lead alone cannot separate them
+    assert cause == "inconclusive" and ev["specific_lead"] and ev["decided_by"] is None
+    on = DiagnosisConfig(n_boot=300, specificity_decides=True)
+    cause, ev = _evidence(before, [occl, noise], on)
+    assert cause == "occlusion" and ev["decided_by"] == "specificity" and "specific" in ev["rule"]
+    # a factorless runner-up (forearm: no specificity evidence) cannot show specificity either
+    assert _evidence(before, [occl, cand("forearm", 0.045, None)], on)[0] == "occlusion"
+    # both specific: nothing separates them
+    cause, ev = _evidence(before, [occl, cand("antenna_pattern", 0.045, True)], on)
+    assert cause == "inconclusive" and not ev["specific_lead"]
+    # an unspecific leader is not named by the runner-up's lack of specificity
+    assert _evidence(before, [cand("palm", 0.05, False), noise], on)[0] == "inconclusive"
+    # specific but below the relevance threshold: still not a cause
+    small = cand("occlusion", 0.012, True)
+    assert _evidence(before, [small, cand("noise", 0.011, False)], on)[0] != "occlusion"

@@ -193,6 +193,9 @@ def score(results: Sequence[Mapping]) -> dict:
             "mean_true_gap_closed": float(np.mean(closed)) if closed else None,
             "speckle_first": sum(bool(r.get("speckle")) and r["speckle"]["leader"] == r["truth"] for r in effect_cases),
             "speckle_clearly_first": sum(_speckle_clearly_first(r.get("speckle"), r["truth"]) for r in effect_cases),
+            # the rows specificity_decides names (on or off), and those whose leader is the right answer
+            "specificity_named": sum(bool(r.get("specific_lead")) for r in results),
+            "specificity_right": sum(bool(r.get("specific_lead")) and r.get("leader") == r["truth"] for r in results),
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
@@ -311,6 +314,11 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "baseline_ssim": report["baseline"]["ssim"], "after_effects": report["after"]["effects"],
             "after_gap_closed": report["after"]["gap_closed"], "lead_ci95": report["evidence"].get("lead_ci95"),
             "recordings_needed": report["evidence"].get("recordings_needed"),
+            "decided_by": report["evidence"].get("decided_by"),
+            # the leader is relevant, not clearly ahead, specific against an unspecific runner-up: what
+            # diagnose.specificity_decides names (whether it is on or not)
+            "leader": report["evidence"].get("leader"),
+            "specific_lead": bool(report["evidence"].get("specific_lead") and report["evidence"].get("leader_significant")),
             "speckle": _speckle_result(report, case.truth),
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
             # step 0's generic settings and the mean SSIM of each grid point (not the effects' grids)
@@ -350,8 +358,8 @@ def split_text(diag_cfg: Mapping) -> str:
 
 def _attributed(r: Mapping) -> str:
     """A case's answer; an inconclusive one with the recordings estimated to decide it."""
-    if r["cause"] != "inconclusive":
-        return r["cause"]
+    if r["cause"] != "inconclusive":  # a cause the lead alone would not name says so
+        return r["cause"] + (" (by specificity)" if r.get("decided_by") == "specificity" else "")
     n = r.get("recordings_needed")
     return "inconclusive (no estimate)" if n is None else f"inconclusive (~{n} recordings)"
 
@@ -380,7 +388,11 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              f"by the greedy selection: {sgn(scores['mean_after_gap_closed'])}. "
              f"Speckle deviance (evidence only, no verdict): the true effect leads in {scores.get('speckle_first', 0)} "
              f"of {scores['effects_total']}, with its CI and its lead's CI above 0 in "
-             f"{scores.get('speckle_clearly_first', 0)}.", "",
+             f"{scores.get('speckle_clearly_first', 0)}. "
+             f"Specificity (`diagnose.specificity_decides`, {'on' if settings.get('specificity_decides') else 'off'}): "
+             f"a relevant leader not clearly ahead, its gain specific and the runner-up's not, in "
+             f"{scores.get('specificity_named', 0)} rows, the right answer in {scores.get('specificity_right', 0)} "
+             "(named `(by specificity)` when on).", "",
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "over the same window of each recording (mean / median): how visible the withheld effect is in the radar "
              "data at all. `world's change on the simulator` is the gap_closed [95 % CI] of the diagnosis's baseline "
@@ -471,7 +483,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         settings = {"rows": n_rows, "split": split_text(diag_cfg),
                     "fit_rows": diag_cfg.get("fit_rows") or "all", "seed": diag_cfg.get("seed", 0),
                     "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
-                    "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS)}
+                    "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS),
+                    "specificity_decides": bool(diag_cfg.get("specificity_decides", False))}
         rel = Path(fig).resolve()
         try:
             rel_s = rel.relative_to(md_path.resolve().parent).as_posix()

@@ -24,10 +24,11 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    calibration split only (the documented grid, Effect.grid(), or ``grids``; then optional gradient
    steps for ``fit == "grad"``); its gap_closed on the evaluation split gets a paired-bootstrap 95 % CI,
    and the change it makes is correlated with the baseline residual (its signature), and its per-row gain
-   with the factor its physics acts through (its specificity: handradar.gap.specificity; evidence only);
+   with the factor its physics acts through (its specificity: handradar.gap.specificity);
    ``cause`` (:func:`decide`; its numbers: report key ``evidence``) has three outcomes:
    the leading candidate when its CI excludes 0, its gap_closed is at least ``min_gap_closed``,
-   and the paired bootstrap of its lead over the runner-up excludes 0; "none" when the upper end
+   and the paired bootstrap of its lead over the runner-up excludes 0 (with ``specificity_decides``,
+   also when the leader's gain is specific and the runner-up's is not: ``evidence.decided_by``); "none" when the upper end
    of the leader's CI is below ``min_gap_closed`` (no candidate closes a relevant part of the gap);
    else "inconclusive", with an estimate of the recordings that would decide it
    (``recordings_needed``, from the CI half-widths scaled by 1/sqrt(rows)). Next to it, as evidence
@@ -148,6 +149,8 @@ class DiagnosisConfig:
     refine_lr: float = 0.05  # Adam step as a fraction of each parameter's range
     n_boot: int = 2000
     min_gap_closed: float = 0.02  # smallest gap_closed worth naming a cause / adding an effect (conf/diagnose.yaml)
+    specificity_decides: bool = False  # a relevant leader not clearly ahead is named when its gain is specific and
+    # the runner-up's is not (handradar.gap.specificity; conf/diagnose.yaml)
     greedy_max: int = 3  # most effects the forward selection adds
     batch_size: int = 8
     radarweightnet: bool = True
@@ -211,14 +214,15 @@ def rows_to_decide(n_eval: int, ci95: Sequence[float], margin: float) -> float |
 
 def decide(effect: str, gap_closed: float, ci95: Sequence[float], lead: float | None,
            lead_ci95: Sequence[float] | None, *, min_gap_closed: float, n_eval: int,
-           calibration_fraction: float) -> dict:
+           calibration_fraction: float, specific_lead: bool = False) -> dict:
     """The verdict on the leading candidate ``effect`` (gap_closed [ci95]; ``lead`` [lead_ci95]: its
-    paired lead over the runner-up, None without one): ``cause`` = the effect, "none" or
+    paired lead over the runner-up, None without one; ``specific_lead``: the leader's gain is specific
+    and the runner-up's is not, which separates the two when the lead's CI cannot): ``cause`` = the effect, "none" or
     "inconclusive", and for "inconclusive" what must be shown (``decides``) and the rows that would
     show it, if the point estimates held (``evaluation_rows_needed``; ``recordings_needed`` =
     calibration + evaluation at ``calibration_fraction``; None when no number of rows would)."""
     out: dict = {"cause": effect, "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
-    ahead = lead_ci95 is None or lead_ci95[0] > 0
+    ahead = lead_ci95 is None or lead_ci95[0] > 0 or specific_lead
     if significant(gap_closed, ci95, min_gap_closed) and ahead:
         return out
     if ci95[1] < min_gap_closed:
@@ -264,6 +268,11 @@ class Candidate:
     deviance: np.ndarray | None = None  # step 1: speckle deviance per evaluation row (handradar.metrics)
     speckle_gap_closed: float = 0.0  # ... its gap_closed against the base's deviance, with its CI
     speckle_ci95: tuple[float, float] = (0.0, 0.0)
+    specificity: dict | None = None  # does its gain come where its physics acts (handradar.gap.specificity)
+
+    @property
+    def specific(self) -> bool:
+        return bool(self.specificity and self.specificity["specific"])
 
     def significant(self, min_gap_closed: float) -> bool:
         return significant(self.gap_closed, self.ci95, min_gap_closed)
@@ -276,6 +285,8 @@ class Candidate:
         if self.deviance is not None:
             out["speckle"] = {"deviance": float(self.deviance.mean()), "gap_closed": float(self.speckle_gap_closed),
                               "ci95": [float(self.speckle_ci95[0]), float(self.speckle_ci95[1])]}
+        if self.specificity is not None:
+            out["specificity"] = self.specificity
         if self.fold_params:
             out["fold_params"] = [{k: float(v) for k, v in p.items()} for p in self.fold_params]
         return out
@@ -285,7 +296,8 @@ class Candidate:
         them); gap_closed against ``before_ssim`` (all evaluation rows), no CI."""
         return dataclasses.replace(self, params=params, ssim=self.ssim[pos], mse=self.mse[pos],
                                    gap_closed=float(gap_closed(before_ssim[pos], self.ssim[pos])),
-                                   spectrograms=None, fold_params=[], deviance=None)
+                                   spectrograms=None, fold_params=[], deviance=None,
+                                   specificity=None)
 
 
 @dataclass
@@ -443,27 +455,37 @@ def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) 
                         f">= {cfg.min_gap_closed}, and the paired-bootstrap 95 % CI of its lead over the runner-up "
                         f"excludes 0; none when the upper end of the leader's CI is below {cfg.min_gap_closed}; "
                         "otherwise inconclusive, with the recordings that would decide it (CI half-widths scaled "
-                        "by 1/sqrt(rows))",
+                        "by 1/sqrt(rows))"
+                        + ("; a leader whose gain is specific (its specificity CI above 0) ahead of a runner-up "
+                           "whose gain is not counts as ahead" if cfg.specificity_decides else ""),
                 "leader": None, "runner_up": None, "leader_significant": False, "lead": None, "lead_ci95": None,
-                "clearly_ahead": False, "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
+                "clearly_ahead": False, "leader_specific": False, "runner_up_specific": False, "specific_lead": False,
+                "decided_by": None,
+                "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
     if not cands:
         return "none", ev
     lead = cands[0]
-    ev["leader"] = lead.effect
-    ev["leader_significant"] = lead.significant(cfg.min_gap_closed)
+    ev.update(leader=lead.effect, leader_significant=lead.significant(cfg.min_gap_closed),
+              leader_specific=lead.specific)
     if len(cands) > 1:
         run = cands[1]
         diff, ci = bootstrap_difference(before, lead.ssim, run.ssim, n_boot=cfg.n_boot, seed=cfg.seed)
         ev.update(runner_up=run.effect, lead=float(diff), lead_ci95=[float(ci[0]), float(ci[1])],
-                  clearly_ahead=bool(ci[0] > 0))
+                  clearly_ahead=bool(ci[0] > 0), runner_up_specific=run.specific)
     else:
         ev["clearly_ahead"] = True
+    # reported either way (what specificity_decides does or would do); it decides only when switched on
+    specific_lead = bool(lead.specific and not ev["runner_up_specific"] and not ev["clearly_ahead"])
+    ev["specific_lead"] = specific_lead
     verdict = decide(lead.effect, lead.gap_closed, lead.ci95, ev["lead"], ev["lead_ci95"],
                      min_gap_closed=cfg.min_gap_closed, n_eval=len(before),
                      # cross-fitted, every recording is an evaluation row: recordings = evaluation rows
-                     calibration_fraction=cfg.calibration_fraction if cfg.folds == 1 else 0.0)
+                     calibration_fraction=cfg.calibration_fraction if cfg.folds == 1 else 0.0,
+                     specific_lead=specific_lead and cfg.specificity_decides)
     cause = verdict.pop("cause")
     ev.update(verdict)
+    if cause == lead.effect:
+        ev["decided_by"] = "specificity" if not ev["clearly_ahead"] else "lead"
     return cause, ev
 
 
@@ -644,6 +666,7 @@ class _Steps:
         self.base_spec, self.cands = self.crossfit([f.base for f in self.folds], self.names, None, "step 1",
                                                    on_base=keep_power, cached=True)
         self.before_ssim, self.before_mse = self.runner.scores(self.base_spec, self.ev)
+        self.assess_specificity()
         self.bones.add(torch.stack([powers[int(r)] for r in self.ev]), d.measured[self.ev] - self.base_spec,
                        self.base_spec)
         self.cause, self.evidence = _evidence(self.before_ssim, self.cands, cfg)
@@ -710,7 +733,7 @@ class _Steps:
                                     "effects": {k: self.base_sim.effect(k).values() for k in self.base},
                                     "calibration": self.calibration},
                        "where": where,
-                       "candidates": self.candidate_entries(),
+                       "candidates": [c.entry(cfg.min_gap_closed) for c in self.cands],
                        "cause": self.cause,
                        "after": self.after,
                        "evidence": self.evidence,
@@ -724,19 +747,13 @@ class _Steps:
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
                                     "min_gap_closed": cfg.min_gap_closed}}
 
-    def candidate_entries(self) -> list[dict]:
-        """The report's candidates, each with its specificity evidence where its physics names a factor."""
+    def assess_specificity(self) -> None:
+        """Each step-1 candidate's specificity evidence, where its physics names a factor (or pixels)."""
         factors = row_factors(self.data.rows.take(self.ev))
         measured, boot = self.data.measured[self.ev], {"n_boot": self.cfg.n_boot, "seed": self.cfg.seed}
-        out = []
         for c in self.cands:
-            e = c.entry(self.cfg.min_gap_closed)
-            sp = (specificity(c.effect, c.ssim - self.before_ssim, factors, **boot)
-                  or pixel_specificity(c.effect, measured, self.base_spec, c.spectrograms, **boot))
-            if sp is not None:
-                e["specificity"] = sp
-            out.append(e)
-        return out
+            c.specificity = (specificity(c.effect, c.ssim - self.before_ssim, factors, **boot)
+                             or pixel_specificity(c.effect, measured, self.base_spec, c.spectrograms, **boot))
 
     def readout(self) -> None:
         """How much a RadarWeightNet trained on the readout fold's training rows closes on its held-out

@@ -124,7 +124,8 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
         lines.append(f"| {c['effect']} | {_params(c['params'])} | {fmt_number(c['ssim'])} | {fmt_number(c['gap_closed'], signed=True)} | "
                      f"[{fmt_number(c['ci95'][0], signed=True)}, {fmt_number(c['ci95'][1], signed=True)}] | "
                      f"{'yes' if c.get('significant') else 'no'} | {fmt_number(c.get('signature_correlation'), 2, True)} | {spec} |")
-    lines += ["", "The last column is specificity evidence (handradar.gap.specificity; not part of the rule): "
+    lines += ["", "The last column is specificity evidence (handradar.gap.specificity; part of the rule only with "
+                  "diagnose.specificity_decides): "
                   "an effect's mean per-row gain where the factor its physics acts through is high minus where it "
                   "is low, factors from the skeletons (noise: within each row, the squared-residual reduction far "
                   "from every simulated return minus next to them). Near 0 or below, the candidate closes a generic "
@@ -136,7 +137,10 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
                     f"[{fmt_number(ev['lead_ci95'][0], signed=True)}, {fmt_number(ev['lead_ci95'][1], signed=True)}]"
                     if ev.get("runner_up") else "no runner-up")
             lines += [f"Evidence: leader {ev['leader']} (significant: {'yes' if ev['leader_significant'] else 'no'}), "
-                      f"{lead} (clearly ahead: {'yes' if ev['clearly_ahead'] else 'no'}).", ""]
+                      f"{lead} (clearly ahead: {'yes' if ev['clearly_ahead'] else 'no'}); leader's gain specific: "
+                      f"{'yes' if ev.get('leader_specific') else 'no'}, runner-up's: "
+                      f"{'yes' if ev.get('runner_up_specific') else 'no'}"
+                      + (" (named by specificity)" if ev.get("decided_by") == "specificity" else "") + ".", ""]
         sp = ev.get("speckle") or {}
         if sp.get("leader"):
             sg = functools.partial(fmt_number, signed=True)

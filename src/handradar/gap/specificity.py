@@ -28,7 +28,9 @@ candidate needs), never from meta.json, so that recordings from any source have 
                                                     mean over rows with a bootstrap 95 % CI
     pixel_specificity(effect, measured, before, after, n_boot, seed) -> dict | None   (the same report key)
 
-Reported as evidence next to gap_closed; it does not enter ``cause``.
+Reported next to gap_closed. It enters ``cause`` only with ``diagnose.specificity_decides``: a relevant
+leader whose lead over the runner-up is not significant is named when its gain is specific and the
+runner-up's is not (handradar.gap.diagnosis.decide).
 """
 
 from __future__ import annotations
