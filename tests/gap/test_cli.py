@@ -85,8 +85,15 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     for other in (b, h):
         assert h2.world.seed != other.world.seed and h2.world.scene != other.world.scene
         assert h2.world.kinematics != other.world.kinematics and h2.world.effects != other.world.effects
-    presets = (b, h, s, sh, h2, sh2)
-    assert len({m.benchmark.results_md for m in presets}) == 6 and len({m.benchmark.figure for m in presets}) == 6
+    # the third held-out world (36 recordings only): the same frozen diagnosis, physics unlike the other three
+    sh3 = _compose(["+experiment=gap_benchmark_36_heldout3"])
+    OmegaConf.resolve(sh3)
+    assert sh3.diagnose == s.diagnose and sh3.sim == s.sim and sh3.benchmark.world == w
+    for other in (b, h, h2):
+        assert sh3.world.seed != other.world.seed and sh3.world.scene != other.world.scene
+        assert sh3.world.kinematics != other.world.kinematics and sh3.world.effects != other.world.effects
+    presets = (b, h, s, sh, h2, sh2, sh3)
+    assert len({m.benchmark.results_md for m in presets}) == 7 and len({m.benchmark.figure for m in presets}) == 7
 
 
 @pytest.mark.slow
