@@ -260,5 +260,5 @@ def test_causes_named_by_specificity_are_counted_and_marked():
     md = results_markdown(res, s, "gap_confusion.png", {"specificity_decides": True})
     assert "| occlusion | occlusion | occlusion (by specificity) | yes |" in md
     assert "| forearm | forearm | forearm | yes |" in md
-    assert "(`diagnose.specificity_decides`, on): a relevant leader not clearly ahead, its gain specific and the " \
-           "runner-up's not, in 2 rows, the right answer in 1" in md
+    assert "(`diagnose.specificity_decides`, on): a leader the rule on gap_closed and the lead does not name, " \
+           "named for its specific gain, in 2 rows, the right answer in 1" in md

@@ -382,21 +382,22 @@ def test_decide_gives_no_estimate_beyond_a_hundred_times_the_rows(lead, rows):
     assert ("tied at any practical size" in v["decides"]) == (rows is None)
 
 
-def test_specificity_separates_a_relevant_leader_from_an_unspecific_runner_up():
-    """``specificity_decides``: a significant, relevant leader whose lead over the runner-up is not
-    significant is named when its gain is specific and the runner-up's is not; not when the runner-up's
-    is specific too, nor when the leader is not relevant. Off (the default), the verdict is unchanged
-    and the evidence still says what the setting would do."""
+def test_specificity_separates_a_leader_from_an_unspecific_runner_up():
+    """``specificity_decides``: a significant leader whose lead over the runner-up is not significant is
+    named when its gain is specific and the runner-up's is not, at any gap_closed (the threshold guards
+    against generic gains); not when the runner-up's is specific too, nor when the leader's is not, nor
+    when its own CI reaches 0. Off (the default), the verdict is unchanged and the evidence still says
+    what the setting would add."""
     rng = np.random.default_rng(1)
     before = rng.uniform(0.8, 0.9, 120)
     gap = 1.0 - before
 
-    def cand(name: str, closed: float, specific: bool | None) -> Candidate:
+    def cand(name: str, closed: float, specific: bool | None, ci95: tuple[float, float] | None = None) -> Candidate:
         ssim = before + closed * gap + rng.normal(0.0, 0.01, before.shape)  # per-row scatter: a tied lead
         sp = None if specific is None else {"factor": "f", "contrast": 0.01, "ci95": [0.005 if specific else -0.005, 0.02],
                                              "specific": specific}
         return Candidate(name, {}, GridFit(name, [], []), ssim, np.zeros_like(ssim), closed,
-                         (0.6 * closed, 1.4 * closed), specificity=sp)
+                         ci95 or (0.6 * closed, 1.4 * closed), specificity=sp)
 
     occl, noise = cand("occlusion", 0.05, True), cand("noise", 0.045, False)
     cause, ev = _evidence(before, [occl, noise], DiagnosisConfig(n_boot=300))
@@ -409,9 +410,26 @@ def test_specificity_separates_a_relevant_leader_from_an_unspecific_runner_up():
     assert _evidence(before, [occl, cand("forearm", 0.045, None)], on)[0] == "occlusion"
     # both specific: nothing separates them
     cause, ev = _evidence(before, [occl, cand("antenna_pattern", 0.045, True)], on)
-    assert cause == "inconclusive" and not ev["specific_lead"]
+    assert cause == "inconclusive" and not ev["specific_lead"] and "lead over the runner-up" in ev["decides"]
     # an unspecific leader is not named by the runner-up's lack of specificity
     assert _evidence(before, [cand("palm", 0.05, False), noise], on)[0] == "inconclusive"
-    # specific but below the relevance threshold: still not a cause
-    small = cand("occlusion", 0.012, True)
-    assert _evidence(before, [small, cand("noise", 0.011, False)], on)[0] != "occlusion"
+    # specific, below the threshold, its CI above 0: named (off: "none", its CI ends below 0.02)
+    small, other = cand("multipath", 0.012, True, (0.004, 0.018)), cand("noise", 0.011, False, (0.003, 0.017))
+    assert _evidence(before, [small, other], DiagnosisConfig(n_boot=300))[0] == "none"
+    cause, ev = _evidence(before, [small, other], on)
+    assert cause == "multipath" and ev["decided_by"] == "specificity" and ev["specific_lead"]
+    # ... but not when its own CI reaches 0: then "none" as before
+    assert _evidence(before, [cand("multipath", 0.008, True, (-0.002, 0.018)), other], on)[0] == "none"
+
+
+def test_decide_with_specificity():
+    # specific and its CI above 0: relevant below the threshold and ahead of an unspecific runner-up
+    assert decide("occlusion", 0.012, (0.002, 0.022), 0.003, (-0.01, 0.016), **DECIDE, specific=True)["cause"] == "occlusion"
+    # the same without specificity: straddles the threshold, inconclusive
+    assert decide("occlusion", 0.012, (0.002, 0.022), 0.003, (-0.01, 0.016), **DECIDE)["cause"] == "inconclusive"
+    # both specific, below the threshold: only the lead decides, and it must be shown
+    v = decide("occlusion", 0.012, (0.002, 0.018), 0.003, (-0.01, 0.016), **DECIDE, specific=True,
+               runner_up_specific=True)
+    assert v["cause"] == "inconclusive" and "lead over the runner-up" in v["decides"]
+    # a specific leader whose CI reaches 0, bounded below the threshold: none
+    assert decide("occlusion", 0.006, (-0.002, 0.014), 0.003, (-0.01, 0.016), **DECIDE, specific=True)["cause"] == "none"

@@ -315,10 +315,11 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "after_gap_closed": report["after"]["gap_closed"], "lead_ci95": report["evidence"].get("lead_ci95"),
             "recordings_needed": report["evidence"].get("recordings_needed"),
             "decided_by": report["evidence"].get("decided_by"),
-            # the leader is relevant, not clearly ahead, specific against an unspecific runner-up: what
-            # diagnose.specificity_decides names (whether it is on or not)
-            "leader": report["evidence"].get("leader"),
-            "specific_lead": bool(report["evidence"].get("specific_lead") and report["evidence"].get("leader_significant")),
+            # what diagnose.specificity_decides names beyond the rule on gap_closed and the lead (on or off),
+            # and the specificity evidence of the two it weighs
+            "leader": report["evidence"].get("leader"), "specific_lead": bool(report["evidence"].get("specific_lead")),
+            "leader_specificity": (cands.get(report["evidence"].get("leader")) or {}).get("specificity"),
+            "runner_up_specificity": (cands.get(report["evidence"].get("runner_up")) or {}).get("specificity"),
             "speckle": _speckle_result(report, case.truth),
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
             # step 0's generic settings and the mean SSIM of each grid point (not the effects' grids)
@@ -390,9 +391,9 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              f"of {scores['effects_total']}, with its CI and its lead's CI above 0 in "
              f"{scores.get('speckle_clearly_first', 0)}. "
              f"Specificity (`diagnose.specificity_decides`, {'on' if settings.get('specificity_decides') else 'off'}): "
-             f"a relevant leader not clearly ahead, its gain specific and the runner-up's not, in "
+             f"a leader the rule on gap_closed and the lead does not name, named for its specific gain, in "
              f"{scores.get('specificity_named', 0)} rows, the right answer in {scores.get('specificity_right', 0)} "
-             "(named `(by specificity)` when on).", "",
+             "(marked `(by specificity)` when on).", "",
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "over the same window of each recording (mean / median): how visible the withheld effect is in the radar "
              "data at all. `world's change on the simulator` is the gap_closed [95 % CI] of the diagnosis's baseline "

@@ -27,8 +27,9 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    with the factor its physics acts through (its specificity: handradar.gap.specificity);
    ``cause`` (:func:`decide`; its numbers: report key ``evidence``) has three outcomes:
    the leading candidate when its CI excludes 0, its gap_closed is at least ``min_gap_closed``,
-   and the paired bootstrap of its lead over the runner-up excludes 0 (with ``specificity_decides``,
-   also when the leader's gain is specific and the runner-up's is not: ``evidence.decided_by``); "none" when the upper end
+   and the paired bootstrap of its lead over the runner-up excludes 0 (with ``specificity_decides``, a
+   leader whose gain is specific needs neither the threshold nor that lead over a runner-up whose gain
+   is not: :func:`decide`, ``evidence.decided_by``); "none" when the upper end
    of the leader's CI is below ``min_gap_closed`` (no candidate closes a relevant part of the gap);
    else "inconclusive", with an estimate of the recordings that would decide it
    (``recordings_needed``, from the CI half-widths scaled by 1/sqrt(rows)). Next to it, as evidence
@@ -149,8 +150,8 @@ class DiagnosisConfig:
     refine_lr: float = 0.05  # Adam step as a fraction of each parameter's range
     n_boot: int = 2000
     min_gap_closed: float = 0.02  # smallest gap_closed worth naming a cause / adding an effect (conf/diagnose.yaml)
-    specificity_decides: bool = False  # a relevant leader not clearly ahead is named when its gain is specific and
-    # the runner-up's is not (handradar.gap.specificity; conf/diagnose.yaml)
+    specificity_decides: bool = False  # a specific leader is relevant at any size and ahead of an unspecific
+    # runner-up (handradar.gap.specificity; decide; conf/diagnose.yaml)
     greedy_max: int = 3  # most effects the forward selection adds
     batch_size: int = 8
     radarweightnet: bool = True
@@ -214,22 +215,28 @@ def rows_to_decide(n_eval: int, ci95: Sequence[float], margin: float) -> float |
 
 def decide(effect: str, gap_closed: float, ci95: Sequence[float], lead: float | None,
            lead_ci95: Sequence[float] | None, *, min_gap_closed: float, n_eval: int,
-           calibration_fraction: float, specific_lead: bool = False) -> dict:
+           calibration_fraction: float, specific: bool = False, runner_up_specific: bool = False) -> dict:
     """The verdict on the leading candidate ``effect`` (gap_closed [ci95]; ``lead`` [lead_ci95]: its
-    paired lead over the runner-up, None without one; ``specific_lead``: the leader's gain is specific
-    and the runner-up's is not, which separates the two when the lead's CI cannot): ``cause`` = the effect, "none" or
+    paired lead over the runner-up, None without one): ``cause`` = the effect, "none" or
     "inconclusive", and for "inconclusive" what must be shown (``decides``) and the rows that would
     show it, if the point estimates held (``evaluation_rows_needed``; ``recordings_needed`` =
-    calibration + evaluation at ``calibration_fraction``; None when no number of rows would)."""
+    calibration + evaluation at ``calibration_fraction``; None when no number of rows would).
+
+    ``specific``: the leader's gain is specific (larger where its physics acts; handradar.gap.specificity),
+    ``runner_up_specific`` the same of the runner-up's. The relevance threshold is there to keep generic
+    gains (a floor filling a sparse spectrogram) from being named; a specific gain is not generic, so it
+    is relevant at any size, and it separates the leader from a runner-up whose gain is not specific
+    when the lead's CI cannot. Both False (the default): the rule on gap_closed and the lead alone."""
     out: dict = {"cause": effect, "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
-    ahead = lead_ci95 is None or lead_ci95[0] > 0 or specific_lead
-    if significant(gap_closed, ci95, min_gap_closed) and ahead:
+    ahead = lead_ci95 is None or lead_ci95[0] > 0 or (specific and not runner_up_specific)
+    relevant = gap_closed >= min_gap_closed or specific
+    if ci95[0] > 0 and relevant and ahead:
         return out
-    if ci95[1] < min_gap_closed:
+    if ci95[1] < min_gap_closed and not (specific and ci95[0] > 0):
         out["cause"] = "none"
         return out
     out["cause"] = "inconclusive"
-    if gap_closed >= min_gap_closed:  # heading for naming the leader: each failing condition must be shown
+    if relevant:  # heading for naming the leader: each failing condition must be shown
         needs: dict[str, float | None] = {}
         if not ci95[0] > 0:
             needs[f"{effect}'s 95 % CI of gap_closed above 0"] = rows_to_decide(n_eval, ci95, gap_closed)
@@ -456,8 +463,9 @@ def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) 
                         f"excludes 0; none when the upper end of the leader's CI is below {cfg.min_gap_closed}; "
                         "otherwise inconclusive, with the recordings that would decide it (CI half-widths scaled "
                         "by 1/sqrt(rows))"
-                        + ("; a leader whose gain is specific (its specificity CI above 0) ahead of a runner-up "
-                           "whose gain is not counts as ahead" if cfg.specificity_decides else ""),
+                        + ("; a leader whose gain is specific (its specificity CI above 0) is relevant at any "
+                           "gap_closed and counts as ahead of a runner-up whose gain is not specific"
+                           if cfg.specificity_decides else ""),
                 "leader": None, "runner_up": None, "leader_significant": False, "lead": None, "lead_ci95": None,
                 "clearly_ahead": False, "leader_specific": False, "runner_up_specific": False, "specific_lead": False,
                 "decided_by": None,
@@ -474,18 +482,23 @@ def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) 
                   clearly_ahead=bool(ci[0] > 0), runner_up_specific=run.specific)
     else:
         ev["clearly_ahead"] = True
-    # reported either way (what specificity_decides does or would do); it decides only when switched on
-    specific_lead = bool(lead.specific and not ev["runner_up_specific"] and not ev["clearly_ahead"])
-    ev["specific_lead"] = specific_lead
-    verdict = decide(lead.effect, lead.gap_closed, lead.ci95, ev["lead"], ev["lead_ci95"],
-                     min_gap_closed=cfg.min_gap_closed, n_eval=len(before),
-                     # cross-fitted, every recording is an evaluation row: recordings = evaluation rows
-                     calibration_fraction=cfg.calibration_fraction if cfg.folds == 1 else 0.0,
-                     specific_lead=specific_lead and cfg.specificity_decides)
-    cause = verdict.pop("cause")
-    ev.update(verdict)
+
+    def verdict(with_specificity: bool) -> dict:
+        return decide(lead.effect, lead.gap_closed, lead.ci95, ev["lead"], ev["lead_ci95"],
+                      min_gap_closed=cfg.min_gap_closed, n_eval=len(before),
+                      # cross-fitted, every recording is an evaluation row: recordings = evaluation rows
+                      calibration_fraction=cfg.calibration_fraction if cfg.folds == 1 else 0.0,
+                      specific=lead.specific and with_specificity,
+                      runner_up_specific=ev["runner_up_specific"] and with_specificity)
+
+    plain, specific = verdict(False), verdict(True)
+    # what specificity_decides names that the rule on gap_closed and the lead alone does not (reported on or off)
+    ev["specific_lead"] = plain["cause"] != lead.effect and specific["cause"] == lead.effect
+    out = dict(specific if cfg.specificity_decides else plain)
+    cause = out.pop("cause")
+    ev.update(out)
     if cause == lead.effect:
-        ev["decided_by"] = "specificity" if not ev["clearly_ahead"] else "lead"
+        ev["decided_by"] = "lead" if plain["cause"] == cause else "specificity"
     return cause, ev
 
 
