@@ -9,7 +9,7 @@ STAMP       := $(VENV)/.installed
 JOBS        ?= 2
 ARGS        ?=
 
-.PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark gap-benchmark-heldout gap-benchmark-36 gap-benchmark-36-heldout gap-benchmark-heldout2 gap-benchmark-36-heldout2 gap-benchmark-36-heldout3 fetch-data clean
+.PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark gap-benchmark-heldout gap-benchmark-36 gap-benchmark-36-heldout gap-benchmark-heldout2 gap-benchmark-36-heldout2 gap-benchmark-36-heldout3 gap-benchmark-heldout3 fetch-data clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-26s %s\n", $$1, $$2}'
@@ -69,6 +69,9 @@ gap-benchmark-36-heldout2: $(STAMP) ## ... at 36 recordings on the second held-o
 
 gap-benchmark-36-heldout3: $(STAMP) ## ... at 36 recordings on the third held-out world
 	$(PY) diagnose.py +experiment=gap_benchmark_36_heldout3 $(ARGS)
+
+gap-benchmark-heldout3: $(STAMP) ## ... at 240 recordings on the third held-out world
+	$(PY) diagnose.py +experiment=gap_benchmark_heldout3 $(ARGS)
 
 fetch-data: $(STAMP) ## SFINGE3D into data/sfinge3d (git clone; DHG: handradar-fetch dataset=dhg fetch.url=URL)
 	$(VENV)/bin/handradar-fetch dataset=sfinge3d $(ARGS)

@@ -86,14 +86,15 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
         assert h2.world.seed != other.world.seed and h2.world.scene != other.world.scene
         assert h2.world.kinematics != other.world.kinematics and h2.world.effects != other.world.effects
     # the third held-out world (36 recordings only): the same frozen diagnosis, physics unlike the other three
-    sh3 = _compose(["+experiment=gap_benchmark_36_heldout3"])
-    OmegaConf.resolve(sh3)
-    assert sh3.diagnose == s.diagnose and sh3.sim == s.sim and sh3.benchmark.world == w
+    h3, sh3 = _compose(["+experiment=gap_benchmark_heldout3"]), _compose(["+experiment=gap_benchmark_36_heldout3"])
+    OmegaConf.resolve(h3), OmegaConf.resolve(sh3)
+    assert h3.diagnose == b.diagnose and h3.sim == b.sim and h3.hand == b.hand and h3.benchmark.cases == b.benchmark.cases
+    assert sh3.diagnose == s.diagnose and sh3.sim == s.sim and sh3.benchmark.world == w and sh3.world == h3.world
     for other in (b, h, h2):
         assert sh3.world.seed != other.world.seed and sh3.world.scene != other.world.scene
         assert sh3.world.kinematics != other.world.kinematics and sh3.world.effects != other.world.effects
-    presets = (b, h, s, sh, h2, sh2, sh3)
-    assert len({m.benchmark.results_md for m in presets}) == 7 and len({m.benchmark.figure for m in presets}) == 7
+    presets = (b, h, s, sh, h2, sh2, h3, sh3)
+    assert len({m.benchmark.results_md for m in presets}) == 8 and len({m.benchmark.figure for m in presets}) == 8
 
 
 @pytest.mark.slow
