@@ -758,7 +758,8 @@ class _Steps:
                                     **{name: getattr(cfg, name) for name in GENERIC_SETTINGS
                                        if name != "rcs_exponents" and getattr(cfg, name) not in (None, [0.0])},
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
-                                    "min_gap_closed": cfg.min_gap_closed}}
+                                    "min_gap_closed": cfg.min_gap_closed,
+                                    "specificity_decides": cfg.specificity_decides}}
 
     def assess_specificity(self) -> None:
         """Each step-1 candidate's specificity evidence, where its physics names a factor (or pixels)."""
