@@ -245,15 +245,15 @@ def test_causes_named_by_specificity_are_counted_and_marked():
     """Rows whose leader specificity_decides names (on or off) are counted, right or wrong, and a cause
     it named carries the mark in the table."""
     res = [{"case": "occlusion", "truth": "occlusion", "cause": "occlusion", "correct": True, "decided_by": "specificity",
-            "leader": "occlusion", "specific_lead": True},
-           {"case": "palm", "truth": "palm", "cause": "inconclusive", "correct": False, "leader": "noise",
+            "top_candidate": "occlusion", "specific_lead": True},
+           {"case": "palm", "truth": "palm", "cause": "inconclusive", "correct": False, "top_candidate": "noise",
             "specific_lead": True, "recordings_needed": 90},
            {"case": "forearm", "truth": "forearm", "cause": "forearm", "correct": True, "decided_by": "lead",
-            "leader": "forearm", "specific_lead": False},
-           {"case": "nothing", "truth": "none", "cause": "none", "correct": True, "leader": "noise", "specific_lead": False}]
+            "top_candidate": "forearm", "specific_lead": False},
+           {"case": "nothing", "truth": "none", "cause": "none", "correct": True, "top_candidate": "noise", "specific_lead": False}]
     for r in res:
         r.update(true_gap_closed=None if r["truth"] == "none" else 0.03, after_gap_closed=0.0, true_ci95=[0.0, 0.06],
-                 true_rank=1, top_candidate=r["leader"], top_gap_closed=0.03, lead_ci95=None, after_effects=[],
+                 true_rank=1, top_gap_closed=0.03, lead_ci95=None, after_effects=[],
                  baseline_ssim=0.9)
     s = score(res)
     assert (s["specificity_named"], s["specificity_right"]) == (2, 1)

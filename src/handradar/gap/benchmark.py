@@ -195,7 +195,7 @@ def score(results: Sequence[Mapping]) -> dict:
             "speckle_clearly_first": sum(_speckle_clearly_first(r.get("speckle"), r["truth"]) for r in effect_cases),
             # the rows specificity_decides names (on or off), and those whose leader is the right answer
             "specificity_named": sum(bool(r.get("specific_lead")) for r in results),
-            "specificity_right": sum(bool(r.get("specific_lead")) and r.get("leader") == r["truth"] for r in results),
+            "specificity_right": sum(bool(r.get("specific_lead")) and r.get("top_candidate") == r["truth"] for r in results),
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
@@ -316,9 +316,9 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "recordings_needed": report["evidence"].get("recordings_needed"),
             "decided_by": report["evidence"].get("decided_by"),
             # what diagnose.specificity_decides names beyond the rule on gap_closed and the lead (on or off),
-            # and the specificity evidence of the two it weighs
-            "leader": report["evidence"].get("leader"), "specific_lead": bool(report["evidence"].get("specific_lead")),
-            "leader_specificity": (cands.get(report["evidence"].get("leader")) or {}).get("specificity"),
+            # and the specificity evidence of the two it weighs (the leader is the top candidate)
+            "specific_lead": bool(report["evidence"].get("specific_lead")),
+            "leader_specificity": top.get("specificity") if top else None,
             "runner_up_specificity": (cands.get(report["evidence"].get("runner_up")) or {}).get("specificity"),
             "speckle": _speckle_result(report, case.truth),
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
