@@ -227,10 +227,13 @@ def test_candidate_scan_credits_the_worlds_own_change(tmp_path, radar, short_cha
     path = fake_world(case, radar, short_chain, tmp_path)
     clean = fake_world(none, radar, short_chain, tmp_path, window_starts_s=window_starts(path).tolist())
     variants = [{"antenna_pattern": {"q": 6.0}}, {"antenna_pattern": {"q": 2.0}}, {"palm_lobe": {"rcs0_m2": 0.0}}]
-    on_case = scan(path, clean, {}, variants, exponent=1.0)
+    on_case = scan(path, clean, {}, variants, exponent=1.0, halves=3)
     # to the engine's re-weighting of the antenna pattern between skeleton steps (second order)
     assert on_case[0]["gap_closed"] == pytest.approx(1.0, abs=1e-4) and on_case[0]["r"] == pytest.approx(1.0, abs=1e-4)
     assert 0.0 < on_case[1]["gap_closed"] < 1.0 and on_case[1]["r"] > 0.5
+    # each split seed's evaluation half: the whole gap closed there too, the weaker variant part of it
+    assert on_case[0]["on_halves"] == pytest.approx([1.0] * 3, abs=1e-4)
+    assert len(on_case[1]["on_halves"]) == 3 and all(0.0 < g < 1.0 for g in on_case[1]["on_halves"])
     assert on_case[2]["gap_closed"] == pytest.approx(0.0, abs=1e-9)
     # the fake effect-free world is the simulator itself: no gap to close at exponent 1 (nan, not a
     # division by zero); at 0.5 a generic gap that a candidate may close, and no world change to match
