@@ -58,15 +58,14 @@ from handradar.gap.benchmark import (
 from handradar.gap.data import load_dataset
 from handradar.gap.engine import VariantEngine
 from handradar.gap.fit import effect_grid
-from handradar.metrics import per_example_ssim
+from handradar.metrics import gap_closed, per_example_ssim
 from handradar.sim.factory import SimFactory
 from handradar.vocab import EFFECTS
 
 
-def gap_closed(before: np.ndarray, after: np.ndarray) -> float:
-    """gap_closed = (mean SSIM after - before) / (1 - mean SSIM before) over the rows given."""
-    b = float(before.mean())
-    return (float(after.mean()) - b) / (1.0 - b) if b < 1.0 else float("nan")
+def closed(before: np.ndarray, after: np.ndarray) -> float:
+    """handradar.metrics.gap_closed over the rows given; nan where the baseline leaves no gap."""
+    return gap_closed(before, after) if before.mean() < 1.0 else float("nan")
 
 
 def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent: float,
@@ -87,8 +86,8 @@ def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent
     out = []
     for v, spec in zip(variants, specs[1:]):
         after = np.asarray(per_example_ssim(measured, spec))
-        row = {"variant": v, "gap_closed": gap_closed(before, after),
-               "on_halves": [gap_closed(before[ev], after[ev]) for ev in evaluation]}
+        row = {"variant": v, "gap_closed": closed(before, after),
+               "on_halves": [closed(before[ev], after[ev]) for ev in evaluation]}
         if world is not None:
             row["r"] = change_correlation(world, spec - specs[0])
         out.append(row)
