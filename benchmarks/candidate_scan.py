@@ -137,8 +137,8 @@ def main() -> None:
         on_clean = scan(worlds.clean(), None, cfg.sim, variants, args.exponent, draws)
     rows = list(best_per_effect(on_case).values()) if args.grids else on_case
     clean_of = {json.dumps(r["variant"], sort_keys=True): r for r in on_clean or []}
-    halves = "".join(f" seed {s} |" for s in range(args.halves))
-    print(f"| case | variant | gap_closed, case | r with the world's change | gap_closed, effect-free world |{halves}")
+    seed_columns = "".join(f" seed {s} |" for s in range(args.halves))
+    print(f"| case | variant | gap_closed, case | r with the world's change | gap_closed, effect-free world |{seed_columns}")
     print("|---|---|---|---|---|" + "---|" * args.halves)
     for row in rows:
         other = clean_of.get(json.dumps(row["variant"], sort_keys=True))
