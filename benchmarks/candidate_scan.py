@@ -79,13 +79,13 @@ def scan(path: Path, clean: Path | None, sim_cfg, variants: list[dict], exponent
     engine = VariantEngine(factory.replace(rcs_exponent=exponent, noise_draws=noise_draws), factory.effects, data.rows)
     specs = torch.as_tensor(engine.spectrograms([{}, *variants]))
     measured = torch.as_tensor(data.measured)
-    before = np.asarray(per_example_ssim(measured, specs[0]))
+    before = per_example_ssim(measured, specs[0])
     evaluation = [stratified_partition(data.labels, (calibration_fraction, 1.0 - calibration_fraction), seed,
                                        every_part=True)[1] for seed in range(halves)]
     world = None if clean is None else measured - spectrograms(clean)
     out = []
     for v, spec in zip(variants, specs[1:]):
-        after = np.asarray(per_example_ssim(measured, spec))
+        after = per_example_ssim(measured, spec)
         row = {"variant": v, "gap_closed": closed(before, after),
                "on_halves": [closed(before[ev], after[ev]) for ev in evaluation]}
         if world is not None:
