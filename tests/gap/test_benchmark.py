@@ -105,8 +105,10 @@ def _spectrogram_file(path, spec, starts=None):
 
 
 def test_settings_line_says_how_the_rows_were_used():
-    assert split_text({"calibration_fraction": 0.6}) == "calibration fraction 0.6"
-    assert split_text({"folds": 3, "calibration_fraction": 0.5}) == "cross-fitting in 3 folds, every row scored out of fold"
+    assert split_text({"calibration_fraction": 0.6}, 1) == "calibration fraction 0.6"
+    # the folds as the diagnosis resolved them (diagnose.folds = auto), not as configured
+    assert split_text({"folds": "auto", "calibration_fraction": 0.5}, 3) == ("cross-fitting in 3 folds, every row "
+                                                                             "scored out of fold")
 
 
 def test_effect_reference_adds_the_worlds_change_to_the_simulator():

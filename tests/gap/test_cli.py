@@ -70,10 +70,10 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     assert h.diagnose == b.diagnose and h.sim == b.sim and h.hand == b.hand and h.benchmark.cases == b.benchmark.cases
     assert h.world.seed != b.world.seed and h.world.scene != b.world.scene and h.world.effects != b.world.effects
     assert h.benchmark.results_md.endswith("gap_benchmark_heldout.md") and h.benchmark.figure != b.benchmark.figure
-    # the 36-recording presets: the frozen diagnosis with 3-fold cross-fitting, 6 x 2 x 3 recordings per case
+    # the 36-recording presets: the frozen diagnosis (diagnose.folds=auto cross-fits them), 6 x 2 x 3 recordings per case
     s, sh = _compose(["+experiment=gap_benchmark_36"]), _compose(["+experiment=gap_benchmark_36_heldout"])
     OmegaConf.resolve(s), OmegaConf.resolve(sh)
-    assert s.diagnose == OmegaConf.merge(b.diagnose, {"folds": 3}) and s.sim == b.sim and s.benchmark.cases == b.benchmark.cases
+    assert s.diagnose == b.diagnose and b.diagnose.folds == "auto" and s.sim == b.sim and s.benchmark.cases == b.benchmark.cases
     w = s.benchmark.world
     assert len(w.gestures) * w.subjects * len(s.world.angles_deg) * w.repetitions == 36
     assert sh.diagnose == s.diagnose and sh.benchmark.world == w and sh.world.seed == h.world.seed
@@ -115,7 +115,9 @@ def test_diagnose_command_on_recordings(tmp_path):
     assert path.name == "gap_report.json" and path.is_file()
     rep = json.loads(path.read_text())
     validate_report(rep)
-    assert rep["n_calibration"] + rep["n_evaluation"] == 8 and {c["effect"] for c in rep["candidates"]} == {"palm", "noise"}
+    # diagnose.folds=auto: 8 recordings cross-fitted in 3 folds, each scored by fits on the other folds
+    assert rep["settings"]["folds"] == 3 and rep["n_evaluation"] == 8 and rep["n_calibration"] == 5
+    assert {c["effect"] for c in rep["candidates"]} == {"palm", "noise"}
     rwn = rep["radarweightnet"]
     assert rwn["epochs"] == 2 and len(rwn["ci95"]) == 2 and set(rwn["weight_correlation"]) == {"palm", "noise"}
     md = (path.parent / "gap_report.md").read_text()

@@ -17,6 +17,7 @@ from handradar.gap.diagnosis import (
     _evidence,
     cross_folds,
     diagnose,
+    resolve_folds,
 )
 from handradar.gap.fit import GridFit
 from handradar.gap.job import write_outputs
@@ -95,12 +96,13 @@ CANDIDATES = ["antenna_pattern", "palm", "noise"]
 
 
 def test_three_folds_score_every_row_out_of_fold_and_name_the_effect(radar, short_chain, tmp_path):
-    # 24 rows, 6 per class: one split evaluates 12 of them, three folds all 24
+    # 24 rows, 6 per class: one split evaluates 12 of them, three folds all 24 (folds = auto: 3 at this size)
     data = gap_data(radar, short_chain, 24, {"antenna_pattern": {"q": 6.0}}, seed=1)
     kw = {"candidates": CANDIDATES, "n_boot": 500, "rcs_exponents": [1.0, 0.5], "rwn_epochs": 1, "rwn_hidden": 16}
     one = diagnose(data, builder(radar, short_chain), {}, DiagnosisConfig(radarweightnet=False, **kw),
                    progress=False).report
-    d = diagnose(data, builder(radar, short_chain), {}, DiagnosisConfig(folds=3, **kw), progress=False)
+    d = diagnose(data, builder(radar, short_chain), {}, DiagnosisConfig.from_mapping({"folds": "auto", **kw}),
+                 progress=False)
     rep = d.report
     validate_report(rep, n_columns=short_chain.n_columns)
     assert one["cause"] == rep["cause"] == "antenna_pattern" and rep["after"]["effects"] == ["antenna_pattern"]
@@ -129,6 +131,20 @@ def test_invalid_folds_are_refused(radar, short_chain, folds, message):
     data = gap_data(radar, short_chain, 24, {}, seed=1)  # 6 rows of each of 4 classes
     with pytest.raises(ValueError, match=message):
         diagnose(data, builder(radar, short_chain), {}, {"folds": folds, "radarweightnet": False}, progress=False)
+
+
+def test_auto_folds_cross_fit_a_folder_and_keep_one_split_for_many_rows():
+    def auto(*counts):
+        return resolve_folds("auto", np.repeat(np.arange(len(counts)), counts))
+
+    assert auto(*[6] * 6) == 3  # a folder of 36 recordings, 6 gestures: every row scored out of fold
+    assert auto(*[10] * 10) == 3  # 100 rows: the largest size cross-fitted (its cost: make bench)
+    assert auto(*[10] * 10, 1) == 1 and auto(*[24] * 10) == 1  # above 100 rows: one split
+    assert auto(6, 2) == 2 and auto(6, 1) == 1  # never more folds than the smallest gesture has rows
+    assert resolve_folds(1, np.zeros(12)) == 1 and resolve_folds(4, np.zeros(12)) == 4  # a number is kept
+    assert DiagnosisConfig.from_mapping({"folds": "auto"}).folds == "auto"
+    with pytest.raises(ValueError, match="or 'auto'"):
+        resolve_folds("some", np.zeros(12))
 
 
 def test_cross_folds_are_stratified_disjoint_and_seeded():

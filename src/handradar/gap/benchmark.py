@@ -322,6 +322,7 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "runner_up_specificity": (cands.get(report["evidence"].get("runner_up")) or {}).get("specificity"),
             "speckle": _speckle_result(report, case.truth),
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
+            "folds": report["settings"]["folds"],  # as resolved (diagnose.folds = auto: by the rows)
             # step 0's generic settings and the mean SSIM of each grid point (not the effects' grids)
             "calibration": {k: v for k, v in (report["baseline"].get("calibration") or {}).items()
                             if k not in ("effects", "effect_grids")}}
@@ -349,9 +350,8 @@ DEFAULT_COMMAND = "python diagnose.py +experiment=gap_benchmark"
 OUTPUT_KEYS = ("benchmark.state_dir", "benchmark.results_md", "benchmark.figures_dir", "benchmark.figure", "progress")
 
 
-def split_text(diag_cfg: Mapping) -> str:
-    """How the benchmark's diagnoses used the rows: one split, or cross-fitting."""
-    folds = int(diag_cfg.get("folds", 1))
+def split_text(diag_cfg: Mapping, folds: int) -> str:
+    """How the benchmark's diagnoses used the rows: one split, or cross-fitting in ``folds`` (as resolved)."""
     if folds > 1:
         return f"cross-fitting in {folds} folds, every row scored out of fold"
     return f"calibration fraction {diag_cfg.get('calibration_fraction', 0.5)}"
@@ -481,7 +481,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                                title=f"Gap benchmark: {scores['effects_correct']}/{scores['effects_total']} effects, "
                                      f"{scores['controls_correct']}/{scores['controls_total']} controls")
         n_rows = results[0]["rows"] if results else 0
-        settings = {"rows": n_rows, "split": split_text(diag_cfg),
+        settings = {"rows": n_rows, "split": split_text(diag_cfg, results[0].get("folds", 1) if results else 1),
                     "fit_rows": diag_cfg.get("fit_rows") or "all", "seed": diag_cfg.get("seed", 0),
                     "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
                     "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS),
