@@ -138,8 +138,8 @@ def test_auto_folds_cross_fit_a_folder_and_keep_one_split_for_many_rows():
         return resolve_folds("auto", np.repeat(np.arange(len(counts)), counts))
 
     assert auto(*[6] * 6) == 3  # a folder of 36 recordings, 6 gestures: every row scored out of fold
-    assert auto(*[10] * 10) == 3  # 100 rows: the largest size cross-fitted (its cost: make bench)
-    assert auto(*[10] * 10, 1) == 1 and auto(*[24] * 10) == 1  # above 100 rows: one split
+    assert auto(*[6] * 9, 5) == 3  # 59 rows: the largest size cross-fitted (its cost: make bench)
+    assert auto(*[6] * 10) == 1 and auto(*[10] * 10) == 1  # from 60 rows: one split (30 evaluation rows or more)
     assert auto(6, 2) == 2 and auto(6, 1) == 1  # never more folds than the smallest gesture has rows
     assert resolve_folds(1, np.zeros(12)) == 1 and resolve_folds(4, np.zeros(12)) == 4  # a number is kept
     assert DiagnosisConfig.from_mapping({"folds": "auto"}).folds == "auto"

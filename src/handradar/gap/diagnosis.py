@@ -58,7 +58,7 @@ other folds of fold 0 and is scored on fold 0's rows only (``radarweightnet.eval
 Report convention: ``n_evaluation`` = N; ``n_calibration`` = the fewest rows any fold's fits saw
 (N minus the largest fold). With folds = 1 nothing of this applies: the diagnosis is the single split
 above, number for number. The default, folds = "auto" (:func:`resolve_folds`), cross-fits in 3 folds
-up to 100 rows (a user's folder of 36 recordings) and keeps the single split above that.
+below 60 rows (a user's folder of 36 recordings) and keeps the single split from there.
 
 No code here reads meta.json ``truth``: the rows come from a dataset file, which has none.
 
@@ -352,17 +352,18 @@ def _subset(labels: np.ndarray, idx: np.ndarray, n: int | None, seed: int) -> np
 
 
 AUTO = "auto"
-# folds = "auto" (the default): cross-fitting in AUTO_FOLDS folds up to AUTO_CROSSFIT_MAX_ROWS rows, one split
-# above. The bound is set by cost, before any verdict at that size: cross-fitting fits every step k + 1 times,
-# and the benchmark's 100-recording diagnosis must stay within its 5 minutes on 2 cores (make bench). The two
-# ends are the sizes the gap benchmark judges: 36 recordings cross-fitted in 3 folds, 240 on one split.
+# folds = "auto" (the default): cross-fitting in AUTO_FOLDS folds below AUTO_CROSSFIT_BELOW_ROWS rows, one split
+# from there. Below it one split evaluates fewer than 30 rows, the fewest its warning asks for; from it the
+# split's half is enough, and cross-fitting, which fits every step k + 1 times, would take a 100-recording
+# diagnosis past its 5 minutes on 2 cores (335 s against 97 s, make bench). Set by those two, before any
+# verdict at these sizes; the gap benchmark judges both sides: 36 recordings cross-fitted, 240 on one split.
 AUTO_FOLDS = 3
-AUTO_CROSSFIT_MAX_ROWS = 100
+AUTO_CROSSFIT_BELOW_ROWS = 60
 
 
 def resolve_folds(folds: int | str, labels: np.ndarray) -> int:
     """The folds a diagnosis of rows with class ``labels`` uses: ``folds`` itself, or for "auto"
-    AUTO_FOLDS (at most the smallest class's rows) up to AUTO_CROSSFIT_MAX_ROWS rows, else 1."""
+    AUTO_FOLDS (at most the smallest class's rows) below AUTO_CROSSFIT_BELOW_ROWS rows, else 1."""
     if folds != AUTO:
         if isinstance(folds, bool) or not isinstance(folds, int) or folds < 1:
             raise ValueError(f"diagnose.folds must be an integer >= 1 (1: one calibration/evaluation split) or "
@@ -370,7 +371,7 @@ def resolve_folds(folds: int | str, labels: np.ndarray) -> int:
         return folds
     smallest = int(np.unique(labels, return_counts=True)[1].min()) if len(labels) else 0
     k = min(AUTO_FOLDS, smallest)
-    return k if len(labels) <= AUTO_CROSSFIT_MAX_ROWS and k >= 2 else 1
+    return k if len(labels) < AUTO_CROSSFIT_BELOW_ROWS and k >= 2 else 1
 
 
 def cross_folds(labels: np.ndarray, k: int, seed: int) -> list[np.ndarray]:
