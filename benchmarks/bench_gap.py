@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -88,7 +89,7 @@ def noise_grid(threads: int) -> list[Result]:
 
 
 def crossfit_subset(root: Path, n: int, out: Path) -> Path:
-    """A folder of links to ``n`` of the recordings in ``root``, taken gesture by gesture in turn (each
+    """A folder with copies of ``n`` of the recordings in ``root`` (not timed), taken gesture by gesture in turn (each
     recording folder is named ``<gesture>_s<subject>_...``), so every gesture keeps rows in every fold."""
     by_gesture: dict[str, list[Path]] = {}
     for rec in sorted(p for p in root.iterdir() if p.is_dir()):
@@ -98,7 +99,7 @@ def crossfit_subset(root: Path, n: int, out: Path) -> Path:
         picked += [q.pop(0) for q in queues if q][: n - len(picked)]
     out.mkdir(parents=True)
     for rec in picked:
-        (out / rec.name).symlink_to(rec.resolve(), target_is_directory=True)
+        shutil.copytree(rec, out / rec.name)  # copies: ingest does not follow linked folders
     return out
 
 
