@@ -182,8 +182,6 @@ class DiagnosisConfig:
         if int(cfg.get("noise_draws", 1)) < 0:
             raise ValueError(f"diagnose.noise_draws must be >= 0 (0: the expectation in closed form), "
                              f"found {cfg['noise_draws']}")
-        if cfg.get("folds") is not None and str(cfg["folds"]) == AUTO:
-            cfg["folds"] = AUTO
         if cfg.get("grids") is not None:
             cfg["grids"] = {str(k): {str(p): [float(x) for x in v] for p, v in dict(g).items()}
                             for k, g in dict(cfg["grids"]).items()}
@@ -355,7 +353,7 @@ AUTO = "auto"
 # folds = "auto" (the default): cross-fitting in AUTO_FOLDS folds below AUTO_CROSSFIT_BELOW_ROWS rows, one split
 # from there. Below it one split evaluates fewer than 30 rows, the fewest its warning asks for; from it the
 # split's half is enough, and cross-fitting, which fits every step k + 1 times, would take a 100-recording
-# diagnosis past its 5 minutes on 2 cores (335 s against 97 s, make bench). Set by those two, before any
+# diagnosis past its 5 minutes on 2 cores (335 s against 101 s, make bench). Set by those two, before any
 # verdict at these sizes; the gap benchmark judges both sides: 36 recordings cross-fitted, 240 on one split.
 AUTO_FOLDS = 3
 AUTO_CROSSFIT_BELOW_ROWS = 60
