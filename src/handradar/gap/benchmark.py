@@ -481,7 +481,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                                title=f"Gap benchmark: {scores['effects_correct']}/{scores['effects_total']} effects, "
                                      f"{scores['controls_correct']}/{scores['controls_total']} controls")
         n_rows = results[0]["rows"] if results else 0
-        settings = {"rows": n_rows, "split": split_text(diag_cfg, results[0].get("folds", 1) if results else 1),
+        settings = {"rows": n_rows, "split": split_text(diag_cfg, results[0]["folds"] if results else 1),
                     "fit_rows": diag_cfg.get("fit_rows") or "all", "seed": diag_cfg.get("seed", 0),
                     "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
                     "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS),
