@@ -266,4 +266,4 @@ def test_causes_named_by_specificity_are_counted_and_marked():
     assert "| occlusion | occlusion | occlusion (by specificity) | yes |" in md
     assert "| forearm | forearm | forearm | yes |" in md
     assert "(`diagnose.specificity_decides`, on): a leader the rule on gap_closed and the lead does not name, " \
-           "named for its specific gain, in 2 rows, the right answer in 1" in md
+           "named for its specific gain, in 2 of 4 cases, the right answer in 1" in md

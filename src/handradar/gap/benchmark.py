@@ -392,7 +392,8 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              f"{scores.get('speckle_clearly_first', 0)}. "
              f"Specificity (`diagnose.specificity_decides`, {'on' if settings.get('specificity_decides') else 'off'}): "
              f"a leader the rule on gap_closed and the lead does not name, named for its specific gain, in "
-             f"{scores.get('specificity_named', 0)} rows, the right answer in {scores.get('specificity_right', 0)} "
+             f"{scores.get('specificity_named', 0)} of {scores['effects_total'] + scores['controls_total']} cases, the right "
+             f"answer in {scores.get('specificity_right', 0)} "
              "(marked `(by specificity)` when on).", "",
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "over the same window of each recording (mean / median): how visible the withheld effect is in the radar "
