@@ -112,7 +112,7 @@ def test_cli_end_to_end(root, tmp_path):
     for name, reason in bad.items():
         assert any(line.startswith(f"  skipped {name}: ") and reason in line for line in lines), (name, proc.stdout)
     check_dataset(out, list(GOOD))
-    assert [p.name for p in out.parent.iterdir()] == ["x.h5"]  # no temporary file left beside it
+    assert sorted(p.name for p in out.parent.iterdir()) == ["x.checks.json", "x.h5"]  # no temporary file left beside it
 
 
 def test_cli_strict_fails_without_writing(root, tmp_path):
@@ -275,7 +275,7 @@ def test_cli_without_root_prints_usage(tmp_path):
     proc = run_cli(f"out={tmp_path / 'x.h5'}", cwd=tmp_path)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert proc.stderr.splitlines() == [
-        "usage: handradar-ingest root=DIR out=FILE.h5 [strict=true] [allow_truncated=true] [key=value ...]",
+        "usage: handradar-ingest root=DIR out=FILE.h5 [strict=true] [allow_truncated=true] [iq_swap=true] [key=value ...]",
         "error: missing value for root (give root=...)"]
 
 
@@ -330,5 +330,5 @@ def test_cli_sigkill_leftover_is_removed_by_the_next_run(root, tmp_path):
     (stale,) = out.parent.glob(f".{out.name}.*.part")
     assert stale.name.startswith(f".x.h5.{proc.pid}@")
     ingest(root, out, ChainConfig(), progress=False)
-    assert [p.name for p in out.parent.iterdir()] == ["x.h5"]
+    assert sorted(p.name for p in out.parent.iterdir()) == ["x.checks.json", "x.h5"]
     check_dataset(out, list(GOOD))

@@ -22,10 +22,13 @@ from handradar.data.recording import (
 )
 from handradar.errors import FormatError
 from tests.data.writer import (
+    ADC_START_S,
+    F0_HZ,
     LEAP_TO_RADAR,
+    SLOPE_HZ_S,
+    C,
     Scene,
     chirp_times,
-    wavelength,
     write_recording,
 )
 
@@ -43,9 +46,11 @@ def test_load_recording(tmp_path):
     # skeleton on the radar clock: t = 0 is radar frame 0
     np.testing.assert_allclose(rec.skeleton.times[[0, -1]], [-0.1, 2.49], atol=1e-9)
     np.testing.assert_allclose(rec.skeleton.positions[:, 0], scene.joints(rec.skeleton.times), atol=2e-6)
-    # the first sample of each chirp is A exp(-j 4 pi R / lambda), R the hand centre's range then
-    r = np.linalg.norm(scene.centre(chirp_times(24)), axis=-1)
-    np.testing.assert_allclose(rec.adc[..., 0, 0], 3000 * np.exp(-4j * np.pi * r / wavelength()), atol=1.0)
+    # the first sample of each chirp is S_TX conj(S_RX) at t_adc: A exp(+j 2 pi (tau (f0 + S t_adc) - S tau^2 / 2)),
+    # tau = 2 R / c, R the hand centre's range then
+    tau = 2 * np.linalg.norm(scene.centre(chirp_times(24)), axis=-1) / C
+    first = 3000 * np.exp(2j * np.pi * (tau * (F0_HZ + SLOPE_HZ_S * ADC_START_S) - SLOPE_HZ_S * tau ** 2 / 2))
+    np.testing.assert_allclose(rec.adc[..., 0, 0], first, atol=1.0)
     assert not hasattr(rec.meta, "truth") and read_truth(rec.folder) == {"a": 1}
 
 

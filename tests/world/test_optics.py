@@ -102,7 +102,7 @@ COHERENT = Scene(skin_diffuse=0.0, skin_specular=0.0)  # physical optics only (t
 def _total(parts: list[Part], scene: Scene, times: np.ndarray) -> np.ndarray:
     """The coherent return of the parts at ``times`` (counts), all facets added with their ranges."""
     st, *_ = surface_tracks(parts, surfaces_of(parts), BARE, scene, RADAR, np.random.default_rng(0), times, 1)
-    return (st.amplitudes(times) * np.exp(-2j * st.wavenumber * st.facet_ranges)).sum(-1)
+    return (st.amplitudes(times) * np.exp(2j * st.wavenumber * st.facet_ranges)).sum(-1)
 
 
 def _cylinder(axis_dir: np.ndarray, centre: np.ndarray, times: np.ndarray, sides: int, rings: int, turn: float,
@@ -162,7 +162,7 @@ def _surface_integral(part: Part, scene: Scene, times: np.ndarray, n_phi: int = 
     d_area = cone.patch_area(0.0, 2 * np.pi / n_phi, 0.0, 1.0 / n_w)
     k = group_wavenumber(RADAR)
     scale = amplitude_scale(scene) * np.sqrt(4 * np.pi) / RADAR.wavelength_m * scene.skin_reflectivity
-    return (scale * cos * d_area / r ** 2 * np.exp(-2j * k * r)).sum(-1)
+    return (scale * cos * d_area / r ** 2 * np.exp(2j * k * r)).sum(-1)
 
 
 @pytest.mark.parametrize("tilt_deg", [0.0, 8.0, 35.0])

@@ -86,50 +86,52 @@ def test_antenna_pattern_half_power_beamwidths():
 
 def test_antenna_pattern_reduces_the_return_off_boresight_as_the_pattern_says(world, radar, chain):
     """Hand at 30 deg: every surface element's and texture point's weight is scaled by G(direction)
-    exactly, so the received power drops by about the two-way gain towards the hand, G^2 at the palm
-    (cos(30)^(2 n_az) = -5 dB for a 64 deg beam; the slide sweeps it from about 10 to 50 deg)."""
-    spec = RecordingSpec("slide", 0, 30.0, 0)
-    w_on, w_off = with_effects(world, "antenna_pattern"), with_effects(world)
-    on, off = simulate(w_on, radar, spec), simulate(w_off, radar, spec)
-    for g_on, g_off in zip(on.tracks.surface.groups, off.tracks.surface.groups):
-        assert g_on.kind == g_off.kind and g_on.weights.shape == g_off.weights.shape
-        gain = antenna_gain(g_on.centres.astype(float), w_on.effects.antenna_pattern)
-        lit = g_off.weights != 0
-        assert lit.mean() > 0.2
-        assert np.allclose(g_on.weights[lit] / g_off.weights[lit], gain[lit], rtol=1e-5)
-    # each instant's return scaled by the two-way gain towards the palm then, weighted by that return
-    palm = on.motion.pose(on.tracks.times).palm_centres()[:, on.motion.slots[0]]
-    g2 = antenna_gain(palm, w_on.effects.antenna_pattern) ** 2
-    power = (np.abs(off.tracks.amplitudes) ** 2).sum(1)
-    expected_db = 10 * np.log10((power * g2).sum() / power.sum())
+    exactly, so the received power drops by the elements' power-weighted two-way gain (the
+    random-phase expectation, -2.4 to -6.2 dB here). One recording's coherent sum strays from it by
+    up to ~2.5 dB either way (its interference pattern), so the power is pooled over four."""
+    expected, measured = np.zeros(2), np.zeros(2)
+    for subject, rep in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        spec = RecordingSpec("slide", subject, 30.0, rep)
+        w_on, w_off = with_effects(world, "antenna_pattern"), with_effects(world)
+        on, off = simulate(w_on, radar, spec), simulate(w_off, radar, spec)
+        for g_on, g_off in zip(on.tracks.surface.groups, off.tracks.surface.groups):
+            assert g_on.kind == g_off.kind and g_on.weights.shape == g_off.weights.shape
+            gain = antenna_gain(g_on.centres.astype(float), w_on.effects.antenna_pattern)
+            lit = g_off.weights != 0
+            assert lit.mean() > 0.2
+            assert np.allclose(g_on.weights[lit] / g_off.weights[lit], gain[lit], rtol=1e-5)
+            expected += [np.sum(np.abs(g_on.weights) ** 2), np.sum(np.abs(g_off.weights) ** 2)]
+        measured += [float(profiles(w, radar, chain, spec)[1].abs().pow(2).sum()) for w in (w_on, w_off)]
+    expected_db, measured_db = (10 * np.log10(x[0] / x[1]) for x in (expected, measured))
+    print(f"antenna pattern, four recordings: expected {expected_db:.2f} dB, measured {measured_db:.2f} dB")
     assert -8.0 < expected_db < -3.0
-    _, p_on = profiles(w_on, radar, chain, spec)
-    _, p_off = profiles(w_off, radar, chain, spec)
-    measured_db = 10 * np.log10(float(p_on.abs().pow(2).sum() / p_off.abs().pow(2).sum()))
-    # the hand spans about +-10 deg around that direction and its surface adds coherently, so the
-    # received power follows the gain at the palm only roughly
-    print(f"antenna pattern: expected {expected_db:.2f} dB, measured {measured_db:.2f} dB")
     assert measured_db == pytest.approx(expected_db, abs=1.5)
     assert measured_db < -2.5
 
 
 def test_palm_adds_energy_in_the_range_bins_and_doppler_of_the_palm(world, radar, chain):
-    spec = RecordingSpec("slide", 0, 0.0, 0)
-    on, p_on = profiles(with_effects(world, "palm"), radar, chain, spec)
-    _, p_off = profiles(with_effects(world), radar, chain, spec)
-    rd_on, rd_off = range_doppler(p_on, chain), range_doppler(p_off, chain)
-    assert rd_on.sum() > 1.3 * rd_off.sum()
-    added = np.clip(rd_on - rd_off, 0, None)
-    # where the palm is: its centre's range bin and radial velocity at each STFT column
-    t = column_times_s(on.radar, chain, on.radar.n_frames)
-    centre = lambda tt: on.motion.pose(tt).palm_centres()[:, on.motion.slots[0]]  # noqa: E731
-    r = np.linalg.norm(centre(t), axis=-1)
-    v = -(np.linalg.norm(centre(t + 1e-3), axis=-1) - r) / 1e-3
-    b0, _ = gate_bins(radar, chain)
-    bins = np.rint(r / radar.range_resolution_m).astype(int) - b0
-    rows = np.abs(velocity_axis_m_s(radar, chain)[None, :] - v[:, None]).argmin(1)
-    near = sum(added[max(0, b - 1):b + 2, max(0, d - 2):d + 3, k].sum() for k, (b, d) in enumerate(zip(bins, rows)))
-    assert near / added.sum() > 0.8
+    """The palm adds energy (pooled over four recordings: one palm's coherent return can cancel) and
+    puts it where the palm is: its centre's range bin and radial velocity at each STFT column."""
+    ratios = []
+    for subject, rep in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        spec = RecordingSpec("slide", subject, 0.0, rep)
+        on, p_on = profiles(with_effects(world, "palm"), radar, chain, spec)
+        _, p_off = profiles(with_effects(world), radar, chain, spec)
+        rd_on, rd_off = range_doppler(p_on, chain), range_doppler(p_off, chain)
+        ratios.append((rd_on.sum(), rd_off.sum()))
+        added = np.clip(rd_on - rd_off, 0, None)
+        t = column_times_s(on.radar, chain, on.radar.n_frames)
+        centre = lambda tt: on.motion.pose(tt).palm_centres()[:, on.motion.slots[0]]  # noqa: E731
+        r = np.linalg.norm(centre(t), axis=-1)
+        v = -(np.linalg.norm(centre(t + 1e-3), axis=-1) - r) / 1e-3
+        b0, _ = gate_bins(radar, chain)
+        bins = np.rint(r / radar.range_resolution_m).astype(int) - b0
+        rows = np.abs(velocity_axis_m_s(radar, chain)[None, :] - v[:, None]).argmin(1)
+        near = sum(added[max(0, b - 1):b + 2, max(0, d - 2):d + 3, k].sum() for k, (b, d) in enumerate(zip(bins, rows)))
+        print(f"palm: added energy near the palm {near / added.sum():.2f}, power ratio {ratios[-1][0] / ratios[-1][1]:.2f}")
+        assert near / added.sum() > 0.8
+    on_total, off_total = np.sum(ratios, axis=0)
+    assert on_total > 1.3 * off_total
 
 
 def test_shadowing_removes_the_return_of_the_hand_hidden_behind_the_other(world, radar):

@@ -10,7 +10,7 @@ from omegaconf import DictConfig
 from handradar.config import VERSION_BASE, config_dir
 from handradar.runs.cli import run_cli
 
-USAGE = "handradar-ingest root=DIR out=FILE.h5 [strict=true] [allow_truncated=true] [key=value ...]"
+USAGE = "handradar-ingest root=DIR out=FILE.h5 [strict=true] [allow_truncated=true] [iq_swap=true] [key=value ...]"
 
 
 @hydra.main(config_path=str(config_dir()), config_name="ingest", version_base=VERSION_BASE)
@@ -24,7 +24,8 @@ def main(cfg: DictConfig) -> None:
         # the dataset is written through a temporary file that is removed on the way out
         summary = ingest(cfg.root, out, instantiate(cfg.chain), skeleton_rate_hz=cfg.skeleton_rate_hz,
                          strict=cfg.strict, allow_truncated=cfg.allow_truncated,
-                         coverage_tolerance_s=cfg.coverage_tolerance_s)
+                         coverage_tolerance_s=cfg.coverage_tolerance_s, iq_swap=cfg.iq_swap,
+                         doppler_flip=cfg.doppler_flip)
         return summary, out
 
     summary, out = run_cli(job, cfg, usage=USAGE, target="out")

@@ -64,10 +64,12 @@ class RecordingsFolder:
     """A folder of ``handradar.recording/1`` recordings, ingested once into a cached dataset file."""
 
     def __init__(self, root: str | Path, chain: ChainConfig, cache_dir: str | Path, *,
-                 skeleton_rate_hz: float = 100.0, strict: bool = False, allow_truncated: bool = False) -> None:
+                 skeleton_rate_hz: float = 100.0, strict: bool = False, allow_truncated: bool = False,
+                 iq_swap: bool = False, doppler_flip: bool = False) -> None:
         self.root = Path(root).expanduser()
         self.chain, self.cache_dir = chain, Path(cache_dir)
         self.skeleton_rate_hz, self.strict, self.allow_truncated = skeleton_rate_hz, strict, allow_truncated
+        self.iq_swap, self.doppler_flip = bool(iq_swap), bool(doppler_flip)
 
     def cache_key(self) -> str:
         listing = []
@@ -77,7 +79,7 @@ class RecordingsFolder:
                 st = f.stat() if f.exists() else None
                 listing.append([str(f.relative_to(self.root)), st.st_size if st else -1, st.st_mtime_ns if st else -1])
         return config_hash(str(self.root.resolve()), listing, self.chain, self.skeleton_rate_hz, self.allow_truncated,
-                           "recordings")
+                           self.iq_swap, self.doppler_flip, "recordings")
 
     def path(self) -> Path:
         if not self.root.is_dir():
@@ -85,8 +87,11 @@ class RecordingsFolder:
         out = self.cache_dir / f"recordings-{self.cache_key()}.h5"
         if not out.is_file():
             summary = ingest(self.root, out, self.chain, skeleton_rate_hz=self.skeleton_rate_hz, strict=self.strict,
-                             allow_truncated=self.allow_truncated, progress=False)
+                             allow_truncated=self.allow_truncated, iq_swap=self.iq_swap,
+                             doppler_flip=self.doppler_flip, progress=False)
             log.info("%s", summary.report())
+            if summary.convention.mirrored() or summary.convention.iq_swapped():
+                log.warning("%s", summary.convention.message())
         return out.resolve()
 
 

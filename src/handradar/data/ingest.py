@@ -3,19 +3,25 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
+import math
 from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import torch
+import numpy as np
 from tqdm.auto import tqdm
 
-from handradar.data.examples import recording_example, skeleton_steps
+from handradar.atomic import atomic_write_text
+from handradar.data.convention import LAGS_S, ConventionCheck, check_row, range_mirror_db
+from handradar.data.examples import Example, recording_example, skeleton_steps
 from handradar.data.hdf5 import open_writer
 from handradar.data.recording import (
     FILES,
+    Recording,
     check_folder,
     find_meta_less_folders,
     find_recordings,
@@ -39,6 +45,7 @@ class IngestSummary:
     written: int = 0
     skipped: list[tuple[str, str]] = field(default_factory=list)  # (recording, reason)
     by_file: Counter = field(default_factory=Counter)  # failing file name (radar.cfg, ...) -> count
+    convention: ConventionCheck = field(default_factory=ConventionCheck)  # per written row
 
     def skip(self, name: str, exc: Exception) -> None:
         self.skipped.append((name, str(exc)))
@@ -53,6 +60,8 @@ class IngestSummary:
             lines.append(f"  skipped {name}: {reason}")
         if len(self.skipped) > 20:
             lines.append(f"  ... and {len(self.skipped) - 20} more")
+        if self.written:
+            lines.append(self.convention.message())
         return "\n".join(lines)
 
 
@@ -120,9 +129,26 @@ def _one_torch_thread() -> Iterator[None]:
         torch.set_num_threads(n)
 
 
+def convention_of(rec: Recording, ex: Example, chain: ChainConfig) -> tuple[np.ndarray, float]:
+    """The sign-convention figures of one written row (handradar.data.convention): r by lag over the
+    recording's whole skeleton, and the range mirror of the window's ADC (first RX, every 4th chirp:
+    1/16 of the capture, plenty for a power ratio)."""
+    sk = rec.skeleton
+    r = check_row(ex.spectrogram, sk.positions, sk.mask, sk.times, rec.radar, chain, ex.window_start_s)
+    f0 = int(round(ex.window_start_s / rec.radar.frame_period_s))
+    inside = (sk.times >= ex.window_start_s) & (sk.times < ex.window_start_s + chain.frames_per_window(rec.radar)
+                                                * rec.radar.frame_period_s)
+    ranges = np.linalg.norm(sk.positions[inside], axis=-1)[np.broadcast_to(sk.mask[inside][..., None],
+                                                                           sk.positions[inside].shape[:-1])]
+    if not ranges.size:
+        return r, math.nan
+    adc = rec.adc[f0:f0 + chain.frames_per_window(rec.radar), ::4, :1]
+    return r, range_mirror_db(adc, rec.radar, np.median(ranges))
+
+
 def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_rate_hz: float = 100.0,
            strict: bool = False, allow_truncated: bool = False, coverage_tolerance_s: float = 0.05,
-           progress: bool = True) -> IngestSummary:
+           iq_swap: bool = False, doppler_flip: bool = False, progress: bool = True) -> IngestSummary:
     """Write every valid recording under ``root`` to ``out``; the file appears only when complete.
 
     strict: raise at the first bad recording (nothing is written; missing files and radar.cfg are
@@ -131,7 +157,10 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
     found and are skipped. All recordings must share the settings that change the processing
     chain (:func:`processing_fields`): every radar.cfg is read first, the most common settings are
     the reference (ties: the first recording in sorted order), and a recording that differs is
-    skipped with the fields and both values.
+    skipped with the fields and both values. iq_swap, doppler_flip: read captures whose I and Q are
+    exchanged, or whose Doppler runs mirrored (handradar.data.convention says which). The sign-
+    convention figures of every row go into the summary and, as JSON, beside ``out``
+    (``<out stem>.checks.json``).
     """
     out = Path(out)
     if out.is_dir():
@@ -185,9 +214,9 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
                                                             "first in sorted order); ingest one configuration per "
                                                             "dataset")
                 rec = load_recording(folder, coverage_tolerance_s=coverage_tolerance_s,
-                                     allow_truncated=allow_truncated)
+                                     allow_truncated=allow_truncated, iq_swap=iq_swap)
                 try:
-                    ex = recording_example(rec, chain, skeleton_rate_hz)
+                    ex = recording_example(rec, chain, skeleton_rate_hz, doppler_flip=doppler_flip)
                 except ValueError as exc:  # a capture shorter than one spectrogram window, a gate beyond range
                     raise FormatError(folder / "adc_data.bin", str(exc)) from None
             except HandradarError as exc:
@@ -203,7 +232,23 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
             labels["recording"] = name_of(folder)
             writer.append(ex.spectrogram, rec.meta.label, ex.skeleton.positions, ex.skeleton.mask,
                           ex.window_start_s, labels)
+            summary.convention.add(labels["recording"], *convention_of(rec, ex, chain))
             summary.written += 1
         if writer is None:
             raise FormatError(root, f"none of the {len(folders)} recordings could be ingested:\n{summary.report()}")
+    conv = summary.convention
+    checks = {"convention": {**conv.summary(), "iq_swap": iq_swap, "doppler_flip": doppler_flip,
+                             "rows": {name: {"r": _finite(r[LAGS_S == 0][0]), "range_mirror_db": _finite(m)}
+                                      for name, r, m in zip(conv.rows, conv.r_by_lag, conv.mirror_db)}}}
+    atomic_write_text(checks_path(out), json.dumps(checks, indent=1) + "\n")  # after the dataset is complete
     return summary
+
+
+def checks_path(dataset: str | Path) -> Path:
+    """The JSON of the data checks written beside a dataset file."""
+    dataset = Path(dataset)
+    return dataset.with_name(dataset.stem + ".checks.json")
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None

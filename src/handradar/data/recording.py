@@ -181,7 +181,7 @@ def read_radar(folder: str | Path) -> RadarConfig:
 
 
 def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
-                   allow_truncated: bool = False) -> Recording:
+                   allow_truncated: bool = False, iq_swap: bool = False) -> Recording:
     """Load and validate one recording folder.
 
     The Leap data must cover the radar capture (first sample at most ``coverage_tolerance_s``
@@ -194,7 +194,7 @@ def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
     # the small files first: a bad leap.jsonl is found before megabytes of ADC are read
     skeleton = read_leap_jsonl(folder / "leap.jsonl", np.asarray(meta.leap_to_radar), meta.radar_start_us)
     check_hand_geometry(skeleton, folder / "leap.jsonl")
-    adc = read_adc(folder / "adc_data.bin", radar, allow_truncated=allow_truncated)
+    adc = read_adc(folder / "adc_data.bin", radar, allow_truncated=allow_truncated, iq_swap=iq_swap)
     end = adc.shape[0] * radar.frame_period_s
     t0, t1 = float(skeleton.times[0]), float(skeleton.times[-1])
     if t0 > coverage_tolerance_s or t1 < end - coverage_tolerance_s:

@@ -27,6 +27,7 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_write_text
+from handradar.data.convention import ConventionCheck, check_row
 from handradar.data.datasets import file_hash
 from handradar.gap.data import GapData, load_dataset
 from handradar.gap.diagnosis import Diagnosis, diagnose
@@ -94,6 +95,19 @@ def headline_metrics(report: dict) -> dict[str, float]:
     return m
 
 
+def check_convention(data: GapData) -> ConventionCheck:
+    """Step 0, before anything is fitted: do the rows follow the simulator's sign convention? (each
+    row's Doppler centroid against its own skeleton; handradar.data.convention). Logged; a warning
+    names the fix where the rows are mirrored."""
+    check = ConventionCheck()
+    rows = data.rows
+    for i in range(len(data)):
+        check.add(str(i), check_row(data.measured[i], rows.skeletons[i], rows.masks[i], rows.times,
+                                    data.radar, data.chain))
+    (log.warning if check.mirrored() else log.info)("%s", check.message())
+    return check
+
+
 def run(cfg: DictConfig) -> Path:
     """The diagnose.py job (module doc); returns the path printed as its last line."""
     import torch
@@ -104,6 +118,7 @@ def run(cfg: DictConfig) -> Path:
     path = instantiate(cfg.data.dataset).path()
     data = load_dataset(path)
     radar, chain = data.radar, data.chain  # simulate with the data's own radar and chain
+    check_convention(data)
     sim_settings = OmegaConf.to_container(cfg.sim, resolve=True)
     out = output_dir()
     tags = {"preset": cfg.task_name, "seed": cfg.diagnose.seed, "data_path": path, "data_hash": file_hash(path),

@@ -13,10 +13,13 @@ Measured data reach that signal through :func:`range_profiles_from_adc` (an expl
 the simulator through :func:`range_response` (the closed-form response of the same windowed
 FFT to a beat tone), so both see the same window and the same bins.
 
-Sign convention: a reflector at range R contributes ``A * exp(j 2 pi f_b n / fs) * exp(-j 4 pi R / lambda)``
-with ``f_b = 2 S R / c``. An *approaching* reflector (R decreasing) therefore has a rising phase
-and lands at *positive* Doppler, i.e. above the centre row of the spectrogram (rows > n/2);
-a receding one lands below it.
+Sign convention (docs/architecture.md, "Sign convention"): the IF is ``S_TX conj(S_RX)``, so a
+reflector at range R contributes ``A exp(+j 2 pi f_b n / fs) exp(+j 4 pi R / lambda_0)`` with
+``f_b = 2 S R / c`` (handradar.radar.signal): positive range bins, and a phase that *falls* while the
+reflector approaches. The rows are ordered by the echo's Doppler shift ``f_D = 2 v / lambda`` (v > 0
+approaching), the negative of the IF's slow-time frequency: the slow-time transform uses the
+``exp(+j ...)`` kernel, so an approaching reflector lands *above* the centre row (rows > n/2) and a
+receding one below it, for measured and simulated data alike.
 
 All functions are plain torch and differentiable; none holds state.
 """
@@ -243,7 +246,8 @@ def stft_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     """STFT over slow time inside each frame, power summed over channels and gated bins.
 
     profiles (..., frames, loops, channels, bins) -> power (..., doppler = stft_len, columns),
-    columns in time order (``columns_per_frame`` per frame), zero Doppler at row stft_len // 2.
+    columns in time order (``columns_per_frame`` per frame), zero Doppler at row stft_len // 2,
+    approaching reflectors above it (module doc, sign convention).
     """
     frames, loops = profiles.shape[-4:-2]
     n_win = (loops - chain.stft_len) // chain.stft_hop + 1
@@ -253,7 +257,8 @@ def stft_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     idx = starts[:, None] + torch.arange(chain.stft_len, device=profiles.device)[None, :]
     segs = profiles[..., idx, :, :]  # (..., frames, n_win, len, ch, bins)
     w = window(chain.stft_window, chain.stft_len, dtype=profiles.real.dtype, device=profiles.device)
-    spec = torch.fft.fftshift(torch.fft.fft(segs * w[:, None, None], dim=-3), dim=-3)
+    # the exp(+j) kernel (unscaled inverse DFT): rows ordered by the echo's Doppler shift, approaching above
+    spec = torch.fft.fftshift(torch.fft.ifft(segs * w[:, None, None], dim=-3, norm="forward"), dim=-3)
     power = (spec.real**2 + spec.imag**2).sum(dim=(-2, -1))  # (..., frames, n_win, doppler)
     power = power.flatten(-3, -2)  # (..., columns, doppler)
     return power.transpose(-1, -2)
@@ -349,7 +354,7 @@ def capture_spectrogram(profiles: torch.Tensor, radar: RadarConfig, chain: Chain
 
 # ---- axes ---------------------------------------------------------------------------------------
 def doppler_axis_hz(radar: RadarConfig, chain: ChainConfig) -> np.ndarray:
-    """Doppler frequency of each spectrogram row (row stft_len // 2 is zero)."""
+    """Echo Doppler shift 2 v / lambda of each spectrogram row, positive approaching (row stft_len // 2 is zero)."""
     k = np.arange(chain.stft_len) - chain.stft_len // 2
     return k / (chain.stft_len * radar.loop_period_s)
 

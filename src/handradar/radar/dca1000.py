@@ -48,8 +48,11 @@ def _expected_frames(cfg: RadarConfig, path: Path, size: int, allow_truncated: b
     return whole
 
 
-def read_adc(path: str | Path, cfg: RadarConfig, *, allow_truncated: bool = False) -> np.ndarray:
-    """Read a capture as complex64 ADC counts, shape (frames, chirps_per_frame, rx, samples)."""
+def read_adc(path: str | Path, cfg: RadarConfig, *, allow_truncated: bool = False, iq_swap: bool = False) -> np.ndarray:
+    """Read a capture as complex64 ADC counts, shape (frames, chirps_per_frame, rx, samples).
+
+    iq_swap: the file holds Q where the layout says I and vice versa (some capture configurations
+    deliver them so); read as I + jQ all the same."""
     path = Path(path)
     try:
         size = path.stat().st_size
@@ -61,7 +64,7 @@ def read_adc(path: str | Path, cfg: RadarConfig, *, allow_truncated: bool = Fals
     out = np.empty(raw.shape, dtype=np.float32)  # re(n) im(n) re(n+1) im(n+1): complex64 pairs
     # one long strided copy per column: numpy's copy loop is fast along a long axis and slow
     # along a short one, so this beats a (..., 2, 2) transpose by about 4x (int16 -> float32 is exact)
-    for dst, src in enumerate((0, 2, 1, 3)):
+    for dst, src in enumerate((2, 0, 3, 1) if iq_swap else (0, 2, 1, 3)):
         out[:, dst] = raw[:, src]
     return out.view(np.complex64).reshape(n_frames, cfg.chirps_per_frame, cfg.n_rx, cfg.n_samples)
 

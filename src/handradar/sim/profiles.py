@@ -5,9 +5,10 @@ For every reflection point k and chirp c (true chirp times, idle gaps included):
     R_k(c)   = (|tx_k(c)| + |rx_k(c)|) / 2            positions linearly interpolated in time
     A_k(c)   = radar_amplitude(sigma_k, |tx_k|, |rx_k|) * gain_k   at the skeleton steps, then
                interpolated linearly in time (amplitudes vary slowly)
-    P_k(c,b) = A_k(c) exp(-j 4 pi R_k(c) / lambda) range_response(2 S R_k(c) / c0 / fs, b, N, window)
+    P_k(c,b) = A_k(c) exp(+j 4 pi R_k(c) / lambda_0) range_response(2 S R_k(c) / c0 / fs, b, N, window)
 
-exactly the sign and window convention of handradar.radar.signal / handradar.radar.chain, so the
+exactly the sign and window convention of handradar.radar.signal (carrier_phase_rad) and
+handradar.radar.chain, so the
 profiles equal range_profiles_from_adc(beat_signal(...)) for the same trajectory (tests check it).
 Points are summed per owner slot: (B, 39, ...) = 38 weighted bone slots + 1 unweighted slot.
 
@@ -26,13 +27,12 @@ Public API:
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 
 from handradar.radar.chain import ChainConfig, gate_bins, range_response
 from handradar.radar.config import SPEED_OF_LIGHT_M_S, RadarConfig
+from handradar.radar.signal import carrier_phase_rad
 from handradar.sim.interp import interp_weights, lerp
 from handradar.sim.scatterers import N_SLOTS, Scatterers, radar_amplitude
 
@@ -79,8 +79,7 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     b0, b1 = gate_bins(radar, chain)
     bins = torch.arange(b0, b1, device=dev)
     beat = rng * (2.0 * radar.slope_hz_per_s / SPEED_OF_LIGHT_M_S / radar.sample_rate_hz)
-    phase = rng * (-4.0 * math.pi / radar.wavelength_m)
-    carrier = torch.polar(amp_c, phase)  # A exp(-j 4 pi R / lambda)
+    carrier = torch.polar(amp_c, carrier_phase_rad(radar, rng))  # A exp(+j 4 pi R / lambda_0)
     prof = range_response(beat, bins, radar.n_samples, chain.range_window, carrier).to(cdtype)  # (B, K, M, nb)
 
     bsz, m = prof.shape[0], prof.shape[2]

@@ -17,7 +17,7 @@ from handradar.vocab import EFFECTS as SIMULATED_EFFECTS
 from handradar.vocab import GESTURES, WORLD_ONLY_EFFECTS
 
 # Bump when the physics or the kinematics change: it enters every cache key.
-WORLD_VERSION = "world/2"
+WORLD_VERSION = "world/3"
 
 # Every effect the world can switch: the simulator's vocabulary and the world-only ones (handradar.vocab).
 EFFECTS = SIMULATED_EFFECTS + WORLD_ONLY_EFFECTS

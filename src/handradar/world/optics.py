@@ -4,7 +4,7 @@ A flat facet seen by the monostatic radar at the origin returns, relative to a r
 
     S = sqrt(4 pi) / lambda * Gamma * cos(theta) * I,     I = integral over the facet of exp(j psi(r)) dA,
 
-with psi(r) = -2 k R(r) the round-trip phase (metres: S is a "square-root RCS", |S|^2 = sigma). For
+with psi(r) = +2 k R(r) the round-trip phase (metres: S is a "square-root RCS", |S|^2 = sigma). For
 a flat plate of area A at normal incidence in its far field I = A, so sigma = 4 pi A^2 Gamma^2 /
 lambda^2. The world takes psi linear across each (small) facet, through the exact phases at its
 corners, which makes I a closed form:

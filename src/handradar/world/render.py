@@ -30,6 +30,7 @@ from handradar.radar.chain import (
     window,
 )
 from handradar.radar.config import RadarConfig
+from handradar.radar.signal import carrier_phase_rad
 from handradar.world.config import Effects, IQImbalance
 from handradar.world.scene import STATIC, ScatterTracks
 
@@ -44,8 +45,8 @@ def interpolate_tracks(tracks: ScatterTracks, times: np.ndarray) -> tuple[np.nda
 
 
 def carrier(radar: RadarConfig, ranges_m: np.ndarray, amps: np.ndarray) -> np.ndarray:
-    """Slow-time phasor A exp(-j 4 pi R / lambda) of each scatterer (complex128)."""
-    return amps * np.exp(-4j * np.pi * ranges_m / radar.wavelength_m)
+    """Slow-time phasor A exp(+j 4 pi R / lambda_0) of each scatterer (complex128, signal.carrier_phase_rad)."""
+    return amps * np.exp(1j * carrier_phase_rad(radar, ranges_m))
 
 
 def _powers(step: torch.Tensor, n: int) -> torch.Tensor:
@@ -57,7 +58,7 @@ def _powers(step: torch.Tensor, n: int) -> torch.Tensor:
 
 
 def synthesize_beat(radar: RadarConfig, ranges_m: np.ndarray, amps: np.ndarray) -> np.ndarray:
-    """Beat signal sum_k A_k exp(j 2 pi f_b,k n / fs) exp(-j 4 pi R_k / lambda) (signal.beat_signal's model).
+    """Beat signal sum_k A_k exp(j 2 pi f_b,k n / fs) exp(+j 4 pi R_k / lambda_0) (signal.beat_signal's model).
 
     ranges_m, amps: (C, K) at C chirps -> (C, n_samples) complex64. Written as a batched matrix
     product: with n = B m + r, exp(j 2 pi nu n) = exp(j 2 pi nu r) exp(j 2 pi nu B m), each factor

@@ -12,7 +12,7 @@ lays them out differently) changes a spectrogram by little more than rounding
 
 Coherent return (physical optics): the surface integral, in ADC counts,
 
-    A = K sqrt(4 pi) / lambda * Gamma * integral over the lit surface of cos(theta) G / R^2 vis exp(-2 j k R) dA,
+    A = K sqrt(4 pi) / lambda * Gamma * integral over the lit surface of cos(theta) G / R^2 vis exp(+2 j k R) dA,
 
 Gamma the skin's amplitude reflectivity (``scene.skin_reflectivity``, the mirror-like part of its
 glossy response), theta the incidence, G the antenna gain, vis the shadowing, K the radar-equation
@@ -74,6 +74,7 @@ from scipy.interpolate import CubicSpline
 
 from handradar.hand.skeleton import BONE_NAMES, BONES
 from handradar.radar.config import SPEED_OF_LIGHT_M_S, RadarConfig
+from handradar.radar.signal import carrier_phase_rad
 from handradar.world.config import AntennaPattern, Effects, Scene, StaticClutter
 from handradar.world.kinematics import Pose
 from handradar.world.optics import SERIES_BELOW_RAD, quadratic_integral
@@ -400,13 +401,13 @@ def build_surfaces(pose: Pose, effects: Effects, scene: Scene) -> Surfaces:
 def group_wavenumber(radar: RadarConfig) -> float:
     """Wavenumber (rad/m) of the phase slope a reflector shows in the chain's range bins.
 
-    A reflector at R contributes exp(-j 4 pi R / lambda) exp(j 2 pi nu(R) n) at ADC sample n
+    A reflector at R contributes exp(+j 4 pi R / lambda_0) exp(j 2 pi nu(R) n) at ADC sample n
     (handradar.radar.signal's convention); the windowed range FFT of a symmetric window weighs the
-    samples about n = (N - 1) / 2, so in every range bin the phase falls by 2 k_g per metre with
-    k_g = 2 pi / lambda - pi (N - 1) S / (c f_s). Elements summed into one facet track take their
-    phase relative to the track with k_g."""
-    return (2 * np.pi / radar.wavelength_m
-            - np.pi * (radar.n_samples - 1) * radar.slope_hz_per_s / (SPEED_OF_LIGHT_M_S * radar.sample_rate_hz))
+    samples about n = (N - 1) / 2, so in every range bin the phase rises by 2 k_g per metre with
+    k_g = 2 pi / lambda_0 + pi (N - 1) S / (c f_s) (the wavenumber at the sampling centre). Elements
+    summed into one facet track take their phase relative to the track with k_g."""
+    return 0.5 * (carrier_phase_rad(radar, 1.0)
+                  + 2 * np.pi * (radar.n_samples - 1) * radar.slope_hz_per_s / (SPEED_OF_LIGHT_M_S * radar.sample_rate_hz))
 
 
 def element_size_m(scene: Scene, k: float, radius_m: float | None = None, tol_scale: float = 1.0) -> float:
@@ -480,7 +481,7 @@ class Strips:
         return self.cone.patch_area(pb[c], pb[c + 1], wb[r], wb[r + 1], steps)
 
     def across(self, steps: np.ndarray, k: float, centre: np.ndarray) -> np.ndarray:
-        """(S, E) complex: the mean over each strip's width of cos(theta) exp(-2 j k (R - R_centre)),
+        """(S, E) complex: the mean over each strip's width of cos(theta) exp(+2 j k (R - R_centre)),
         theta the incidence, over the part of the strip that faces the radar (0 where none does).
 
         Across a strip (x = -1/2 .. 1/2, phi = phi_c + alpha x) the phase is quadratic through its two
@@ -511,8 +512,8 @@ class Strips:
             return out
         side0, side1 = self.ranges(steps, cols, 0.0, 0.5), self.ranges(steps, cols, 1.0, 0.5)
         on = lit[:, cols]
-        s = (-2 * k * (side1 - side0))[on]
-        q = (-4 * k * (side0 + side1 - 2 * r_c[:, cols]))[on]
+        s = (2 * k * (side1 - side0))[on]
+        q = (4 * k * (side0 + side1 - 2 * r_c[:, cols]))[on]
         lo, hi, beta, amp, const = (x[:, cols][on] for x in (lo, hi, beta, amp, const))
         vals = (0.5 * amp * (np.exp(1j * beta) * quadratic_integral(s + alpha, q, lo, hi)
                              + np.exp(-1j * beta) * quadratic_integral(s - alpha, q, lo, hi))
@@ -1047,7 +1048,7 @@ class SurfaceTracks:
 
     times: np.ndarray
     weight_times: np.ndarray
-    wavenumber: float  # rad/m, the relative phase exp(-2 j k (R - R_facet))
+    wavenumber: float  # rad/m, the relative phase exp(+2 j k (R - R_facet))
     groups: list[ElementGroup]
     facet_ranges: np.ndarray
 
@@ -1089,7 +1090,7 @@ class SurfaceTracks:
             fac = g.facet[act]
             splines = g.splines
             rel = (_spline_eval(splines[0], self.times, ts, act) - r_f[:, fac]).astype(np.float32)  # from the facet
-            phase = np.float32(-2 * k) * rel
+            phase = np.float32(2 * k) * rel
             val = _lerp_eval(g.weights, self.weight_times, ts, act) * (np.cos(phase) + 1j * np.sin(phase))
             if g.kind == STRIP:  # along the cylinder (the exact factor across it is in the weight)
                 a, b = (_spline_eval(c, self.times, ts, act).astype(np.float32) for c in splines[1:])
@@ -1361,14 +1362,14 @@ def surface_tracks(parts: list[Part], surf: Surfaces, effects: Effects, scene: S
     r0 = cat1([sp.ranges(slice(None), i, 0.5, 0.0) for sp, i in zip(el.strips, st_idx)], (len(times), 0))
     r1 = cat1([sp.ranges(slice(None), i, 0.5, 1.0) for sp, i in zip(el.strips, st_idx)], (len(times), 0))
     mid = cat1([sp.ranges(slice(None), i, 0.5, 0.5) for sp, i in zip(el.strips, st_idx)], (len(times), 0))
-    c_s, a_s, b_s = mid[:, ks], -2 * k * (r1 - r0)[:, ks], -4 * k * (r0 + r1 - 2 * mid)[:, ks]
+    c_s, a_s, b_s = mid[:, ks], 2 * k * (r1 - r0)[:, ks], 4 * k * (r0 + r1 - 2 * mid)[:, ks]
     r_v = np.linalg.norm(el.tri_vertices, axis=-1)  # (T, V)
     rt = r_v[:, el.tris[kt]]  # (T, Et, 3)
     lin = rt.mean(-1)
     # a flat triangle's phase centre: its corners' mean range moved towards the range of its centroid
     # by the mean of the near field's quadratic departure (3/4 of it)
     c_t = lin + 0.75 * (np.linalg.norm(el.tri_centre[:, kt], axis=-1) - lin)
-    a_t, b_t = -2 * k * (rt[..., 1] - rt[..., 0]), -2 * k * (rt[..., 2] - rt[..., 0])
+    a_t, b_t = 2 * k * (rt[..., 1] - rt[..., 0]), 2 * k * (rt[..., 2] - rt[..., 0])
 
     # the tracks' ranges: each facet's area-weighted mean range of all its elements
     fac = np.r_[np.concatenate(st_facet) if st_facet else np.zeros(0, int), el.tri_facet]

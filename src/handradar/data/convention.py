@@ -1,0 +1,155 @@
+"""Does a capture follow the simulator's sign convention? Checked against the recording's own skeleton.
+
+Every recording pairs radar with a skeleton, so the convention can be read off the data before
+anything is fitted (docs/architecture.md, "Sign convention"):
+
+- Doppler: per STFT column, the spectrogram's Doppler centroid (m/s, approaching positive) against
+  the tracked joints' mean approach speed -d|r|/dt, correlated per row over the window (uncentred:
+  sum c v / sqrt(sum c^2 sum v^2), so that a hand moving at constant speed still shows its sign;
+  clutter removal keeps the centroid of a still scene at zero). A strongly negative median means
+  the rows are mirrored against the simulator (swapped I/Q, conjugated samples, a down-chirp). The
+  lag that maximises it measures a clock offset between Leap and radar.
+- Range (raw ADC only): the hand's energy belongs at positive range bins near the skeleton's
+  range; the same energy at the mirrored bins N - b means I and Q are swapped.
+
+Thresholds (docs/architecture.md, "Sign convention"): on independent noise one row's r spreads by
+about 1 / sqrt(32 columns) = 0.18, so a median of -0.3 over several rows is no accident.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from handradar.radar.chain import ChainConfig, column_times_s, velocity_axis_m_s
+from handradar.radar.config import RadarConfig
+
+MIRRORED_BELOW_R = -0.3  # median Doppler-centroid r below which the rows are mirrored
+MIRRORED_RANGE_DB = 6.0  # hand energy this much stronger at the mirrored range bins: I/Q swapped
+LAG_REPORTED_S = 0.075  # a best lag beyond 1.5 STFT columns (50 ms each) is reported as a clock offset
+MIN_SPEED_M_S = 0.02  # rows whose hand hardly moves radially (rms) carry no sign (r undefined)
+LAG_MIN_R = 0.3  # a clock offset is reported only where the lagged rows agree this well
+LAGS_S = np.round(np.arange(-0.3, 0.301, 0.025), 3)
+
+
+def doppler_centroid(spectrogram: np.ndarray, radar: RadarConfig, chain: ChainConfig) -> np.ndarray:
+    """(columns,) power-weighted mean approach speed (m/s) of a (doppler, columns) [0, 1] spectrogram."""
+    power = 10.0 ** (chain.dynamic_range_db / 10.0 * (np.asarray(spectrogram, np.float64) - 1.0))
+    vel = velocity_axis_m_s(radar, chain)
+    return (power * vel[:, None]).sum(0) / power.sum(0)
+
+
+def approach_speed(positions: np.ndarray, mask: np.ndarray, times: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """(len(at),) mean -d|r|/dt (m/s) of the tracked joints at times ``at`` (NaN outside ``times``).
+
+    positions (T, 2, 21, 3) metres, mask (T, 2), times (T,) seconds, increasing."""
+    rng = np.linalg.norm(positions, axis=-1)  # (T, 2, 21)
+    speed = -np.gradient(rng, times, axis=0)
+    tracked = mask[:, :, None] & np.ones(rng.shape, bool)
+    tracked[1:-1] &= mask[:-2, :, None] & mask[2:, :, None]  # a hand appearing or vanishing is no motion
+    per_step = np.where(tracked, speed, 0.0).sum((1, 2)) / np.maximum(tracked.sum((1, 2)), 1)
+    valid = tracked.any((1, 2))
+    if valid.sum() < 2:
+        return np.full(len(at), np.nan)
+    out = np.interp(at, times[valid], per_step[valid])
+    out[(at < times[0]) | (at > times[-1])] = np.nan
+    return out
+
+
+def lagged_correlations(centroid: np.ndarray, positions: np.ndarray, mask: np.ndarray, times: np.ndarray,
+                        column_times: np.ndarray, lags_s: np.ndarray = LAGS_S) -> np.ndarray:
+    """(len(lags_s),) uncentred correlation r between the Doppler centroid and the skeleton's approach
+    speed ``lag`` seconds later (NaN where fewer than 8 columns overlap or the hand hardly moves)."""
+    out = np.full(len(lags_s), np.nan)
+    for i, lag in enumerate(lags_s):
+        v = approach_speed(positions, mask, times, column_times + lag)
+        ok = np.isfinite(v) & np.isfinite(centroid)
+        c, v = centroid[ok], v[ok]
+        if ok.sum() >= 8 and np.sqrt(np.mean(v ** 2)) >= MIN_SPEED_M_S and np.any(c != 0):
+            out[i] = float((c * v).sum() / np.sqrt((c ** 2).sum() * (v ** 2).sum()))
+    return out
+
+
+def range_mirror_db(adc: np.ndarray, radar: RadarConfig, ranges_m: np.ndarray) -> float:
+    """Moving energy at the mirrored range bins N - b over that at the bins b of the skeleton's ranges
+    (dB; large and positive: I and Q swapped). adc (frames, chirps, rx, samples) complex counts."""
+    spec = np.fft.fft(np.asarray(adc) * np.hanning(radar.n_samples), axis=-1)
+    spec = spec - spec.mean(axis=(0, 1), keepdims=True)  # static clutter out: the moving hand stays
+    power = (np.abs(spec) ** 2).sum(axis=(0, 1, 2))  # (samples,)
+    n = radar.n_samples
+    bins = np.unique(np.rint(np.asarray(ranges_m) / radar.range_resolution_m).astype(int))
+    bins = np.unique(np.clip((bins[:, None] + np.arange(-1, 2)).ravel(), 1, n // 2 - 1))
+    return float(10 * np.log10((power[n - bins].sum() + 1e-30) / (power[bins].sum() + 1e-30)))
+
+
+@dataclass
+class ConventionCheck:
+    """Per-row figures and their summary; ``message()`` is the line a user reads."""
+
+    rows: list[str] = field(default_factory=list)
+    r_by_lag: list[np.ndarray] = field(default_factory=list)  # each (len(LAGS_S),)
+    mirror_db: list[float] = field(default_factory=list)  # NaN where no ADC was at hand
+
+    def add(self, name: str, r_by_lag: np.ndarray, mirror_db: float = math.nan) -> None:
+        self.rows.append(name)
+        self.r_by_lag.append(np.asarray(r_by_lag, np.float64))
+        self.mirror_db.append(float(mirror_db))
+
+    def _lag_medians(self) -> np.ndarray:
+        table = np.array(self.r_by_lag).reshape(-1, len(LAGS_S))
+        with np.errstate(all="ignore"):
+            return np.array([np.nanmedian(c) if np.isfinite(c).any() else np.nan for c in table.T])
+
+    def summary(self) -> dict:
+        """median_r (lag 0), n_rows (rows with a defined r), best_lag_s and its median r, median mirror_db."""
+        zero = int(np.flatnonzero(LAGS_S == 0)[0])
+        r0 = np.array([r[zero] for r in self.r_by_lag]) if self.r_by_lag else np.zeros(0)
+        med = self._lag_medians()
+        best = int(np.nanargmax(med)) if np.isfinite(med).any() else zero
+        mirror = np.array(self.mirror_db)
+        finite = mirror[np.isfinite(mirror)]
+        return {
+            "n_rows": int(np.isfinite(r0).sum()),
+            "median_r": float(np.nanmedian(r0)) if np.isfinite(r0).any() else None,
+            "best_lag_s": float(LAGS_S[best]),
+            "median_r_at_best_lag": float(med[best]) if np.isfinite(med[best]) else None,
+            "median_range_mirror_db": float(np.median(finite)) if finite.size else None,
+        }
+
+    def mirrored(self) -> bool:
+        s = self.summary()
+        return s["median_r"] is not None and s["median_r"] < MIRRORED_BELOW_R
+
+    def iq_swapped(self) -> bool:
+        s = self.summary()
+        return s["median_range_mirror_db"] is not None and s["median_range_mirror_db"] > MIRRORED_RANGE_DB
+
+    def message(self) -> str:
+        """One line per finding: the figures, and what to do where something is off."""
+        s = self.summary()
+        if s["median_r"] is None:
+            return "sign convention: not checked (no row whose hand moves radially)"
+        lines = [f"sign convention: Doppler centroid vs skeleton approach speed r = {s['median_r']:+.2f} "
+                 f"(median of {s['n_rows']} rows)"
+                 + ("" if s["median_range_mirror_db"] is None else
+                    f"; hand energy at mirrored range bins {s['median_range_mirror_db']:+.0f} dB")]
+        if self.iq_swapped():
+            lines.append("  the hand sits at negative range bins: I and Q are swapped (or the samples conjugated); "
+                         "re-ingest with iq_swap=true")
+        elif self.mirrored():
+            lines.append("  the rows are Doppler-mirrored against the simulator (range bins right): a down-chirp or a "
+                         "conjugated carrier phase; re-ingest with doppler_flip=true")
+        elif (abs(s["best_lag_s"]) >= LAG_REPORTED_S and s["median_r_at_best_lag"] is not None
+                and s["median_r_at_best_lag"] >= max(LAG_MIN_R, s["median_r"] + 0.05)):
+            lines.append(f"  the skeleton best matches the radar {s['best_lag_s'] * 1e3:+.0f} ms later "
+                         f"(r = {s['median_r_at_best_lag']:+.2f}): check radar_start_us in meta.json")
+        return "\n".join(lines)
+
+
+def check_row(spectrogram: np.ndarray, positions: np.ndarray, mask: np.ndarray, times: np.ndarray,
+              radar: RadarConfig, chain: ChainConfig, window_start_s: float = 0.0) -> np.ndarray:
+    """r_by_lag of one row: ``times`` on the same clock as ``window_start_s`` (the window's first frame)."""
+    cols = column_times_s(radar, chain, chain.frames_per_window(radar)) + window_start_s
+    return lagged_correlations(doppler_centroid(spectrogram, radar, chain), positions, mask, times, cols)
