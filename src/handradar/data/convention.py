@@ -22,8 +22,9 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
 
-from handradar.radar.chain import ChainConfig, column_times_s, velocity_axis_m_s
+from handradar.radar.chain import ChainConfig, column_times_s, velocity_axis_m_s, window
 from handradar.radar.config import RadarConfig
 
 MIRRORED_BELOW_R = -0.3  # median Doppler-centroid r below which the rows are mirrored
@@ -75,7 +76,7 @@ def lagged_correlations(centroid: np.ndarray, positions: np.ndarray, mask: np.nd
 def range_mirror_db(adc: np.ndarray, radar: RadarConfig, ranges_m: np.ndarray) -> float:
     """Moving energy at the mirrored range bins N - b over that at the bins b of the skeleton's ranges
     (dB; large and positive: I and Q swapped). adc (frames, chirps, rx, samples) complex counts."""
-    spec = np.fft.fft(np.asarray(adc) * np.hanning(radar.n_samples), axis=-1)
+    spec = np.fft.fft(np.asarray(adc) * window("hann", radar.n_samples, dtype=torch.float64).numpy(), axis=-1)
     spec = spec - spec.mean(axis=(0, 1), keepdims=True)  # static clutter out: the moving hand stays
     power = (np.abs(spec) ** 2).sum(axis=(0, 1, 2))  # (samples,)
     n = radar.n_samples
@@ -118,6 +119,12 @@ class ConventionCheck:
             "median_range_mirror_db": float(np.median(finite)) if finite.size else None,
         }
 
+    def to_json(self) -> dict:
+        """summary() and each row's r (lag 0) and range mirror (dB), None where undefined."""
+        zero = int(np.flatnonzero(LAGS_S == 0)[0])
+        return {**self.summary(), "rows": {name: {"r": _finite(r[zero]), "range_mirror_db": _finite(m)}
+                                           for name, r, m in zip(self.rows, self.r_by_lag, self.mirror_db)}}
+
     def mirrored(self) -> bool:
         s = self.summary()
         return s["median_r"] is not None and s["median_r"] < MIRRORED_BELOW_R
@@ -146,6 +153,10 @@ class ConventionCheck:
             lines.append(f"  the skeleton best matches the radar {s['best_lag_s'] * 1e3:+.0f} ms later "
                          f"(r = {s['median_r_at_best_lag']:+.2f}): check radar_start_us in meta.json")
         return "\n".join(lines)
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
 
 
 def check_row(spectrogram: np.ndarray, positions: np.ndarray, mask: np.ndarray, times: np.ndarray,

@@ -5,11 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from handradar.data.recording import Recording
 from handradar.hand.skeleton import HandSequence
-from handradar.radar.chain import ChainConfig, capture_spectrogram, range_profiles_from_adc
+from handradar.radar.chain import ChainConfig, measured_spectrogram
 
 
 @dataclass
@@ -29,14 +28,8 @@ def skeleton_steps(chain: ChainConfig, radar, rate_hz: float) -> int:
     return len(window_times(chain.frames_per_window(radar), radar.frame_period_s, rate_hz))
 
 
-def recording_example(rec: Recording, chain: ChainConfig, skeleton_rate_hz: float, *,
-                      doppler_flip: bool = False) -> Example:
-    """The measured spectrogram of the capture's strongest window and the skeleton over it.
-
-    doppler_flip: mirror the Doppler axis (the per-range-bin signal conjugated), for captures whose
-    carrier phase runs against the convention while their range bins are right (a down-chirp)."""
-    profiles = range_profiles_from_adc(torch.as_tensor(rec.adc), rec.radar, chain)
-    spec, start_frame = capture_spectrogram(profiles.conj() if doppler_flip else profiles, rec.radar, chain)
+def recording_example(rec: Recording, chain: ChainConfig, skeleton_rate_hz: float) -> Example:
+    spec, start_frame = measured_spectrogram(rec.adc, rec.radar, chain)
     t0 = start_frame * rec.radar.frame_period_s
     rel = window_times(chain.frames_per_window(rec.radar), rec.radar.frame_period_s, skeleton_rate_hz)
     window = rec.skeleton.resample(t0 + rel)

@@ -11,12 +11,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-import torch
 import numpy as np
+import torch
 from tqdm.auto import tqdm
 
 from handradar.atomic import atomic_write_text
-from handradar.data.convention import LAGS_S, ConventionCheck, check_row, range_mirror_db
+from handradar.data.convention import ConventionCheck, check_row, range_mirror_db
 from handradar.data.examples import Example, recording_example, skeleton_steps
 from handradar.data.hdf5 import open_writer
 from handradar.data.recording import (
@@ -135,15 +135,12 @@ def convention_of(rec: Recording, ex: Example, chain: ChainConfig) -> tuple[np.n
     1/16 of the capture, plenty for a power ratio)."""
     sk = rec.skeleton
     r = check_row(ex.spectrogram, sk.positions, sk.mask, sk.times, rec.radar, chain, ex.window_start_s)
-    f0 = int(round(ex.window_start_s / rec.radar.frame_period_s))
-    inside = (sk.times >= ex.window_start_s) & (sk.times < ex.window_start_s + chain.frames_per_window(rec.radar)
-                                                * rec.radar.frame_period_s)
-    ranges = np.linalg.norm(sk.positions[inside], axis=-1)[np.broadcast_to(sk.mask[inside][..., None],
-                                                                           sk.positions[inside].shape[:-1])]
+    f0, n = int(round(ex.window_start_s / rec.radar.frame_period_s)), chain.frames_per_window(rec.radar)
+    inside = (sk.times >= ex.window_start_s) & (sk.times < ex.window_start_s + n * rec.radar.frame_period_s)
+    ranges = np.linalg.norm(sk.positions[inside][sk.mask[inside]], axis=-1)  # (tracked hand steps, 21)
     if not ranges.size:
         return r, math.nan
-    adc = rec.adc[f0:f0 + chain.frames_per_window(rec.radar), ::4, :1]
-    return r, range_mirror_db(adc, rec.radar, np.median(ranges))
+    return r, range_mirror_db(rec.adc[f0:f0 + n, ::4, :1], rec.radar, np.median(ranges))
 
 
 def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_rate_hz: float = 100.0,
@@ -214,9 +211,9 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
                                                             "first in sorted order); ingest one configuration per "
                                                             "dataset")
                 rec = load_recording(folder, coverage_tolerance_s=coverage_tolerance_s,
-                                     allow_truncated=allow_truncated, iq_swap=iq_swap)
+                                     allow_truncated=allow_truncated, iq_swap=iq_swap, doppler_flip=doppler_flip)
                 try:
-                    ex = recording_example(rec, chain, skeleton_rate_hz, doppler_flip=doppler_flip)
+                    ex = recording_example(rec, chain, skeleton_rate_hz)
                 except ValueError as exc:  # a capture shorter than one spectrogram window, a gate beyond range
                     raise FormatError(folder / "adc_data.bin", str(exc)) from None
             except HandradarError as exc:
@@ -236,10 +233,7 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
             summary.written += 1
         if writer is None:
             raise FormatError(root, f"none of the {len(folders)} recordings could be ingested:\n{summary.report()}")
-    conv = summary.convention
-    checks = {"convention": {**conv.summary(), "iq_swap": iq_swap, "doppler_flip": doppler_flip,
-                             "rows": {name: {"r": _finite(r[LAGS_S == 0][0]), "range_mirror_db": _finite(m)}
-                                      for name, r, m in zip(conv.rows, conv.r_by_lag, conv.mirror_db)}}}
+    checks = {"convention": {**summary.convention.to_json(), "iq_swap": iq_swap, "doppler_flip": doppler_flip}}
     atomic_write_text(checks_path(out), json.dumps(checks, indent=1) + "\n")  # after the dataset is complete
     return summary
 
@@ -249,6 +243,3 @@ def checks_path(dataset: str | Path) -> Path:
     dataset = Path(dataset)
     return dataset.with_name(dataset.stem + ".checks.json")
 
-
-def _finite(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None

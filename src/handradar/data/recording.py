@@ -25,6 +25,7 @@ from handradar.hand.leap import (
 from handradar.hand.skeleton import HandSequence
 from handradar.radar.config import RadarConfig
 from handradar.radar.dca1000 import read_adc
+from handradar.radar.signal import doppler_mirror
 from handradar.vocab import GESTURES
 
 FORMAT = "handradar.recording/1"
@@ -181,12 +182,13 @@ def read_radar(folder: str | Path) -> RadarConfig:
 
 
 def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
-                   allow_truncated: bool = False, iq_swap: bool = False) -> Recording:
+                   allow_truncated: bool = False, iq_swap: bool = False, doppler_flip: bool = False) -> Recording:
     """Load and validate one recording folder.
 
     The Leap data must cover the radar capture (first sample at most ``coverage_tolerance_s``
     after radar frame 0 starts, last at most that long before the capture ends), and the hands
-    meta.json announces must be tracked somewhere in the capture.
+    meta.json announces must be tracked somewhere in the capture. iq_swap, doppler_flip: read a
+    capture that the sign-convention check (handradar.data.convention) finds mirrored.
     """
     folder = check_folder(folder)
     radar = read_radar(folder)  # first: the Leap coverage check below measures against its capture length
@@ -195,6 +197,8 @@ def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
     skeleton = read_leap_jsonl(folder / "leap.jsonl", np.asarray(meta.leap_to_radar), meta.radar_start_us)
     check_hand_geometry(skeleton, folder / "leap.jsonl")
     adc = read_adc(folder / "adc_data.bin", radar, allow_truncated=allow_truncated, iq_swap=iq_swap)
+    if doppler_flip:  # range bins right, Doppler mirrored (a down-chirp, a conjugated carrier)
+        adc = doppler_mirror(adc)
     end = adc.shape[0] * radar.frame_period_s
     t0, t1 = float(skeleton.times[0]), float(skeleton.times[-1])
     if t0 > coverage_tolerance_s or t1 < end - coverage_tolerance_s:

@@ -31,6 +31,12 @@ def carrier_phase_rad(radar: RadarConfig, range_m):
             / SPEED_OF_LIGHT_M_S) * range_m
 
 
+def doppler_mirror(adc: np.ndarray) -> np.ndarray:
+    """conj(x[-n mod N]) along fast time: each range bin's windowed spectrum conjugated bin by bin (a
+    DFT-even window is symmetric under n -> -n), so the range bins stay and the Doppler mirrors."""
+    return np.conj(np.roll(adc[..., ::-1], 1, axis=-1))
+
+
 def beat_signal(radar: RadarConfig, ranges_m: np.ndarray, amplitudes: np.ndarray,
                 *, chunk: int = 64) -> np.ndarray:
     """Complex ADC samples of K reflectors.

@@ -30,7 +30,7 @@ from handradar.radar.chain import (
     window,
 )
 from handradar.radar.config import RadarConfig
-from handradar.radar.signal import carrier_phase_rad
+from handradar.radar.signal import carrier_phase_rad, doppler_mirror
 from handradar.world.config import Effects, IQImbalance
 from handradar.world.scene import STATIC, ScatterTracks
 
@@ -122,9 +122,8 @@ def adc_cube(tracks: ScatterTracks, radar: RadarConfig, n_frames: int, effects: 
         mu, nu = iq_coefficients(iq)
         if iq.stage == "adc":
             out = mu * out + nu * np.conj(out)
-        else:  # slow_time: conj(x[-n mod N]) has the conjugate windowed spectrum bin by bin (symmetric window)
-            mirrored = np.conj(np.roll(out[..., ::-1], 1, axis=-1))
-            out = mu * out + nu * mirrored
+        else:  # slow_time: the image sits in the same range bin, Doppler mirrored
+            out = mu * out + nu * doppler_mirror(out)
     return out.astype(np.complex64)
 
 
