@@ -25,10 +25,14 @@ install: $(STAMP) ## create .venv and install handradar (editable) with its test
 run: $(STAMP) ## the default few-shot experiment on reference-world data, end to end
 	$(PY) train.py +experiment=few_shot_5pct $(ARGS)
 
-test: $(STAMP) ## the default test suite (fast; excludes @slow)
+SFINGE3D_HERE = test -d data/sfinge3d/Dictionary || test -d $${HANDRADAR_SHARED:-../shared}/data/sfinge3d/Dictionary
+
+test: $(STAMP) ## the default test suite (fast; excludes @slow); fetches SFINGE3D once where it is missing
+	@$(SFINGE3D_HERE) || $(MAKE) --no-print-directory fetch-data || echo "SFINGE3D could not be fetched: its tests skip (make fetch-data)"
 	$(PY) -m pytest -n $(JOBS) -q $(ARGS)
 
 test-full: $(STAMP) ## every test, slow ones included
+	@$(SFINGE3D_HERE) || $(MAKE) --no-print-directory fetch-data || echo "SFINGE3D could not be fetched: its tests skip (make fetch-data)"
 	$(PY) -m pytest -n $(JOBS) -q -m "" $(ARGS)
 
 bench: $(STAMP) ## benchmarks: throughput figures and ratios (benchmarks/results.md)

@@ -1,6 +1,11 @@
-"""Shared fixtures: the default radar and chain (and a short one), the shared data folder, one torch
-thread per test (the suite runs one xdist worker per core; oversubscribed threads make small
-tensor ops up to 10x slower)."""
+"""Shared fixtures: the default radar and chain (and a short one), SFINGE3D, one torch thread per
+test (the suite runs one xdist worker per core; oversubscribed threads make small tensor ops up to
+10x slower).
+
+SFINGE3D (not in the repository: no licence file comes with it) is looked for in ``data/sfinge3d``
+(``make fetch-data``), then in ``../shared/data/sfinge3d``; the tests that need it skip with a hint
+where neither holds it, except under CI, which always has ``../shared`` and must run every test.
+``HANDRADAR_DATA`` and ``HANDRADAR_SHARED`` move the two folders."""
 
 from __future__ import annotations
 
@@ -15,6 +20,7 @@ from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 
 REPO = Path(__file__).resolve().parents[1]
+LOCAL_DATA = Path(os.environ.get("HANDRADAR_DATA", REPO / "data"))
 SHARED = Path(os.environ.get("HANDRADAR_SHARED", REPO.parent / "shared"))
 DEFAULT_CFG = """\
 % the default radar of docs/architecture.md, "Processing chain and simulator"
@@ -51,7 +57,12 @@ def _one_torch_thread():
 
 
 @pytest.fixture(scope="session")
-def shared_dir() -> Path:
-    if not SHARED.is_dir():
-        pytest.fail(f"../shared not found at {SHARED}: the tests need the shared data folder beside the repo")
-    return SHARED
+def sfinge3d_dir() -> Path:
+    """The SFINGE3D Dictionary's parent folder (module doc)."""
+    for folder in (LOCAL_DATA / "sfinge3d", SHARED / "data" / "sfinge3d"):
+        if (folder / "Dictionary").is_dir():
+            return folder
+    message = f"SFINGE3D not found in {LOCAL_DATA / 'sfinge3d'} or {SHARED / 'data' / 'sfinge3d'}: run `make fetch-data`"
+    if os.environ.get("CI"):
+        pytest.fail(message)
+    pytest.skip(message)

@@ -35,7 +35,7 @@ def git(*args: str, cwd: Path) -> None:
                    check=True, capture_output=True)
 
 
-def make_mirror(folder: Path, shared_dir: Path, *, drop: tuple[str, ...] = ()) -> str:
+def make_mirror(folder: Path, sfinge3d_dir: Path, *, drop: tuple[str, ...] = ()) -> str:
     """A git repository with the SFINGE3D layout (README + 13 x 36 Dictionary files); its file:// URL."""
     folder.mkdir(parents=True)
     (folder / "README.md").write_text("# Dataset V1 (test mirror)\n")
@@ -44,7 +44,7 @@ def make_mirror(folder: Path, shared_dir: Path, *, drop: tuple[str, ...] = ()) -
             continue
         path = folder / rel
         path.parent.mkdir(parents=True, exist_ok=True)
-        src = shared_dir / "data" / "sfinge3d" / rel
+        src = sfinge3d_dir / rel
         path.write_text(src.read_text() if rel in REAL else tiny_instance(k))
     git("init", "-q", cwd=folder)
     git("add", "-A", cwd=folder)
@@ -58,9 +58,9 @@ def leftovers(parent: Path) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def mirror(tmp_path_factory, shared_dir) -> tuple[Path, str]:
+def mirror(tmp_path_factory, sfinge3d_dir) -> tuple[Path, str]:
     folder = tmp_path_factory.mktemp("mirror") / "DatasetV1"
-    return folder, make_mirror(folder, shared_dir)
+    return folder, make_mirror(folder, sfinge3d_dir)
 
 
 def test_sfinge3d_from_a_git_mirror(mirror, tmp_path):
@@ -100,8 +100,8 @@ def test_sfinge3d_unreachable(tmp_path):
     assert not out.exists() and leftovers(out.parent) == []
 
 
-def test_sfinge3d_wrong_layout(tmp_path, shared_dir):
-    url = make_mirror(tmp_path / "broken", shared_dir, drop=("Dictionary/13/36.txt", "Dictionary/2/5.txt"))
+def test_sfinge3d_wrong_layout(tmp_path, sfinge3d_dir):
+    url = make_mirror(tmp_path / "broken", sfinge3d_dir, drop=("Dictionary/13/36.txt", "Dictionary/2/5.txt"))
     out = tmp_path / "data" / "sfinge3d"
     with pytest.raises(FormatError) as info:
         fetch("sfinge3d", out, url)

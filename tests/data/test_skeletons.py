@@ -48,8 +48,8 @@ def test_missing_dataset_folder_says_how_to_get_it(tmp_path, name, hint):
     assert hint in msg and "source.root=DIR" in msg and f"data.{name}.root=DIR" in msg
 
 
-def test_sfinge3d_items(shared_dir):
-    root = shared_dir / "data" / "sfinge3d"
+def test_sfinge3d_items(sfinge3d_dir):
+    root = sfinge3d_dir
     items = list(iter_source("sfinge3d", root))
     assert len(items) == 468 and len({it.name for it in items}) == 468
     assert [it.label for it in items[::36]] == list(range(13))

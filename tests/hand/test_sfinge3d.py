@@ -17,8 +17,8 @@ from handradar.hand.skeleton import BONE_NAMES
 
 
 @pytest.fixture(scope="module")
-def dictionary(shared_dir):
-    return shared_dir / "data" / "sfinge3d"
+def dictionary(sfinge3d_dir):
+    return sfinge3d_dir
 
 
 @pytest.fixture(scope="module")

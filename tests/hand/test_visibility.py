@@ -207,7 +207,7 @@ def _compare_with_ray_caster(joints: np.ndarray, mask: np.ndarray, steps) -> tup
     return differ, compared
 
 
-def test_analytic_matches_the_ray_caster_on_sfinge3d_and_two_hand_windows(shared_dir):
+def test_analytic_matches_the_ray_caster_on_sfinge3d_and_two_hand_windows(sfinge3d_dir):
     """Real SFINGE3D motion (placed over the radar, 100 Hz, retargeted as the features do) and a
     two-hand demo window: the batched closed-form counts equal the per-step ray caster's, up to a
     vertex in rare bone-steps (measured on 43 windows: 24 of 6688 bone-steps, all +1, where trimesh's
@@ -216,7 +216,7 @@ def test_analytic_matches_the_ray_caster_on_sfinge3d_and_two_hand_windows(shared
     times = np.arange(160) / 100.0
     differ = compared = 0
     for rel in ("Dictionary/7/3.txt", "Dictionary/2/5.txt"):  # grab, two
-        seq = place_in_radar(read_sfinge3d(shared_dir / "data" / "sfinge3d" / rel), up_axis="y",
+        seq = place_in_radar(read_sfinge3d(sfinge3d_dir / rel), up_axis="y",
                              centre_m=(0.0, 0.0, 0.30))
         win = seq.resample(seq.times[0] + times)
         d, n = _compare_with_ray_caster(hand.joints(win.positions), win.mask, range(0, 160, 40))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import string
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,12 +15,12 @@ from handradar.errors import FormatError
 from handradar.radar.config import RadarConfig, parse_cfg
 
 C = 299_792_458.0
-VISUALIZER = "data/ti_cfg/xwr18xx_visualizer_profile.cfg"
+VISUALIZER = Path(__file__).parent / "ti_cfg" / "xwr18xx_visualizer_profile.cfg"  # Clear BSD, licence beside it
 
 
 @pytest.fixture(scope="module")
-def vis(shared_dir) -> RadarConfig:
-    return RadarConfig.from_file(shared_dir / VISUALIZER)
+def vis() -> RadarConfig:
+    return RadarConfig.from_file(VISUALIZER)
 
 
 def test_visualizer_file_layout(vis):

@@ -153,13 +153,13 @@ def test_motion_window_picks_the_gesture():
     np.testing.assert_allclose(ws.positions[-1], pos[9], atol=1e-6)
 
 
-def test_handradar_synth_on_sfinge3d_subset(shared_dir, tmp_path):
+def test_handradar_synth_on_sfinge3d_subset(sfinge3d_dir, tmp_path):
     """The console script on two SFINGE3D classes: a valid dataset with the source's labels."""
     root = tmp_path / "sf"
     for c in ("6", "10"):
         (root / "Dictionary" / c).mkdir(parents=True)
         for i in (1, 2):
-            src = shared_dir / "data" / "sfinge3d" / "Dictionary" / c / f"{i}.txt"
+            src = sfinge3d_dir / "Dictionary" / c / f"{i}.txt"
             (root / "Dictionary" / c / f"{i}.txt").write_text(src.read_text())
     out = tmp_path / "sf.h5"
     exe = Path(sys.executable).with_name("handradar-synth")
