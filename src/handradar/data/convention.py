@@ -42,20 +42,26 @@ def doppler_centroid(spectrogram: np.ndarray, radar: RadarConfig, chain: ChainCo
     return (power * vel[:, None]).sum(0) / power.sum(0)
 
 
-def approach_speed(positions: np.ndarray, mask: np.ndarray, times: np.ndarray, at: np.ndarray) -> np.ndarray:
-    """(len(at),) mean -d|r|/dt (m/s) of the tracked joints at times ``at`` (NaN outside ``times``).
+def speed_track(positions: np.ndarray, mask: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(times, mean -d|r|/dt in m/s) of the tracked joints at the steps where a hand is tracked.
 
     positions (T, 2, 21, 3) metres, mask (T, 2), times (T,) seconds, increasing."""
     rng = np.linalg.norm(positions, axis=-1)  # (T, 2, 21)
     speed = -np.gradient(rng, times, axis=0)
-    tracked = mask[:, :, None] & np.ones(rng.shape, bool)
+    tracked = np.repeat(mask[:, :, None], rng.shape[-1], axis=-1)
     tracked[1:-1] &= mask[:-2, :, None] & mask[2:, :, None]  # a hand appearing or vanishing is no motion
     per_step = np.where(tracked, speed, 0.0).sum((1, 2)) / np.maximum(tracked.sum((1, 2)), 1)
     valid = tracked.any((1, 2))
-    if valid.sum() < 2:
+    return times[valid], per_step[valid]
+
+
+def approach_speed(track: tuple[np.ndarray, np.ndarray], at: np.ndarray) -> np.ndarray:
+    """(len(at),) the :func:`speed_track` at times ``at`` (NaN outside it or where it has < 2 steps)."""
+    t, v = track
+    if len(t) < 2:
         return np.full(len(at), np.nan)
-    out = np.interp(at, times[valid], per_step[valid])
-    out[(at < times[0]) | (at > times[-1])] = np.nan
+    out = np.interp(at, t, v)
+    out[(at < t[0]) | (at > t[-1])] = np.nan
     return out
 
 
@@ -64,8 +70,9 @@ def lagged_correlations(centroid: np.ndarray, positions: np.ndarray, mask: np.nd
     """(len(lags_s),) uncentred correlation r between the Doppler centroid and the skeleton's approach
     speed ``lag`` seconds later (NaN where fewer than 8 columns overlap or the hand hardly moves)."""
     out = np.full(len(lags_s), np.nan)
+    track = speed_track(positions, mask, times)  # once: every lag only interpolates it
     for i, lag in enumerate(lags_s):
-        v = approach_speed(positions, mask, times, column_times + lag)
+        v = approach_speed(track, column_times + lag)
         ok = np.isfinite(v) & np.isfinite(centroid)
         c, v = centroid[ok], v[ok]
         if ok.sum() >= 8 and np.sqrt(np.mean(v ** 2)) >= MIN_SPEED_M_S and np.any(c != 0):

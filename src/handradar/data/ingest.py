@@ -131,8 +131,8 @@ def _one_torch_thread() -> Iterator[None]:
 
 def convention_of(rec: Recording, ex: Example, chain: ChainConfig) -> tuple[np.ndarray, float]:
     """The sign-convention figures of one written row (handradar.data.convention): r by lag over the
-    recording's whole skeleton, and the range mirror of the window's ADC (first RX, every 4th chirp:
-    1/16 of the capture, plenty for a power ratio)."""
+    recording's whole skeleton, and the range mirror of the window's ADC (first RX, every 8th chirp:
+    1/32 of the window, plenty for a power ratio)."""
     sk = rec.skeleton
     r = check_row(ex.spectrogram, sk.positions, sk.mask, sk.times, rec.radar, chain, ex.window_start_s)
     f0, n = int(round(ex.window_start_s / rec.radar.frame_period_s)), chain.frames_per_window(rec.radar)
@@ -140,7 +140,7 @@ def convention_of(rec: Recording, ex: Example, chain: ChainConfig) -> tuple[np.n
     ranges = np.linalg.norm(sk.positions[inside][sk.mask[inside]], axis=-1)  # (tracked hand steps, 21)
     if not ranges.size:
         return r, math.nan
-    return r, range_mirror_db(rec.adc[f0:f0 + n, ::4, :1], rec.radar, np.median(ranges))
+    return r, range_mirror_db(rec.adc[f0:f0 + n, ::8, :1], rec.radar, np.median(ranges))
 
 
 def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_rate_hz: float = 100.0,
