@@ -8,8 +8,11 @@ PY          := $(VENV)/bin/python
 STAMP       := $(VENV)/.installed
 JOBS        ?= 2
 ARGS        ?=
+WORLD       ?= default
+SIZE        ?= 240
+COMMA       := ,
 
-.PHONY: help install run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark gap-benchmark-heldout gap-benchmark-36 gap-benchmark-36-heldout gap-benchmark-heldout2 gap-benchmark-36-heldout2 gap-benchmark-36-heldout3 gap-benchmark-heldout3 fetch-data clean
+.PHONY: help install smoke run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark gap-report fetch-data clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-26s %s\n", $$1, $$2}'
@@ -22,7 +25,10 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP) ## create .venv and install handradar (editable) with its test tools
 
-run: $(STAMP) ## the default few-shot experiment on reference-world data, end to end
+smoke: $(STAMP) ## the whole pipeline on a tiny world in ~3 min: a table and a figure (not results)
+	$(PY) train.py +experiment=few_shot_5pct +debug=smoke $(ARGS)
+
+run: $(STAMP) ## the paper's 5 %* comparison on the reference world (~12 min cold): a table and a figure
 	$(PY) train.py +experiment=few_shot_5pct $(ARGS)
 
 SFINGE3D_HERE = test -d data/sfinge3d/Dictionary || test -d $${HANDRADAR_SHARED:-../shared}/data/sfinge3d/Dictionary
@@ -39,9 +45,9 @@ bench: $(STAMP) ## benchmarks: throughput figures and ratios (benchmarks/results
 	$(PY) -m benchmarks $(ARGS)
 
 sweep: $(STAMP) ## the paper's few-shot grid over seeds (Hydra multirun, joblib launcher)
-	$(PY) train.py -m hydra/launcher=joblib +experiment=few_shot_5pct,few_shot_20pct,few_shot_50pct seed=1,2,3 $(ARGS)
+	$(PY) train.py -m hydra/launcher=joblib +experiment=few_shot_5pct,few_shot_20pct,few_shot_50pct variants=all seed=1,2,3 $(ARGS)
 
-tables: $(STAMP) ## markdown + CSV tables (mean +/- std over seeds) from the MLflow runs
+tables: $(STAMP) ## docs/results.md (every row with its command, commit, seeds, machine) + CSV tables from the MLflow runs
 	$(PY) -m experiments.tables $(ARGS)
 
 mlflow-ui: $(STAMP) ## the MLflow dashboard on http://127.0.0.1:5000
@@ -53,29 +59,11 @@ world: $(STAMP) ## write reference-world recordings to data/world_recordings
 world-gallery: $(STAMP) ## PNG grid of reference-world spectrograms per gesture and per effect
 	$(PY) -m handradar.viz.world_gallery $(ARGS)
 
-gap-benchmark: $(STAMP) ## the withheld-effect validation of the gap diagnosis
-	$(PY) diagnose.py +experiment=gap_benchmark $(ARGS)
+gap-benchmark: $(STAMP) ## the withheld-effect validation of the gap diagnosis: WORLD=default|heldout|heldout2|heldout3 SIZE=240|36 (comma lists: one multirun)
+	$(PY) diagnose.py $(if $(findstring $(COMMA),$(WORLD)$(SIZE)),-m,) +experiment=gap_benchmark world=$(WORLD) benchmark.size=$(SIZE) $(ARGS)
 
-gap-benchmark-heldout: $(STAMP) ## ... judged on the held-out world's physics (settings frozen)
-	$(PY) diagnose.py +experiment=gap_benchmark_heldout $(ARGS)
-
-gap-benchmark-36: $(STAMP) ## the gap benchmark at a user's data size: 36 recordings per case, 3-fold cross-fitting
-	$(PY) diagnose.py +experiment=gap_benchmark_36 $(ARGS)
-
-gap-benchmark-36-heldout: $(STAMP) ## ... judged on the held-out world's physics (settings frozen)
-	$(PY) diagnose.py +experiment=gap_benchmark_36_heldout $(ARGS)
-
-gap-benchmark-heldout2: $(STAMP) ## ... judged on the second held-out world (the test suite's other world)
-	$(PY) diagnose.py +experiment=gap_benchmark_heldout2 $(ARGS)
-
-gap-benchmark-36-heldout2: $(STAMP) ## ... at 36 recordings on the second held-out world
-	$(PY) diagnose.py +experiment=gap_benchmark_36_heldout2 $(ARGS)
-
-gap-benchmark-36-heldout3: $(STAMP) ## ... at 36 recordings on the third held-out world
-	$(PY) diagnose.py +experiment=gap_benchmark_36_heldout3 $(ARGS)
-
-gap-benchmark-heldout3: $(STAMP) ## ... at 240 recordings on the third held-out world
-	$(PY) diagnose.py +experiment=gap_benchmark_heldout3 $(ARGS)
+gap-report: $(STAMP) ## the gap benchmark's summary table from results/gap_benchmark/*.json (writes docs/gap_report.md)
+	$(PY) -m experiments.gap_report $(ARGS)
 
 fetch-data: $(STAMP) ## SFINGE3D into data/sfinge3d (git clone; DHG: handradar-fetch dataset=dhg fetch.url=URL)
 	$(VENV)/bin/handradar-fetch dataset=sfinge3d $(ARGS)

@@ -10,10 +10,12 @@ import hydra
 from omegaconf import DictConfig
 
 import handradar.config  # noqa: F401  (registers the ${hr_root:} resolver used by the config tree)
+from handradar.runs.cli import hydra_overrides_checked
 
 USAGE = "python train.py [+experiment=PRESET] [data=recordings data.root=DIR] [key=value ...]"
 
 
+@hydra_overrides_checked(USAGE)
 @hydra.main(config_path="conf", config_name="train", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     from handradar.cli import run_job

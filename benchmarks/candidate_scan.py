@@ -21,16 +21,16 @@ all-rows figure (the third held-out world's effect-free control: occlusion +0.01
 +0.015 to +0.030 over six evaluation halves).
 
 In-sample and best-of-grid, so an upper bound on what a diagnosis would credit; a variant worth
-landing must also hold on the worlds it was not designed on (``+experiment=gap_benchmark_36_heldout``,
+landing must also hold on the worlds it was not designed on (``+experiment=gap_benchmark world=heldout benchmark.size=36``,
 ``..._heldout2``). Besides the vocabulary's effects, the variants may use the probe effects of
 benchmarks/probe_effects.py (candidates tried and not landed).
 
-    python -m benchmarks.candidate_scan +experiment=gap_benchmark_36 --case multipath \\
+    python -m benchmarks.candidate_scan +experiment=gap_benchmark benchmark.size=36 --case multipath \\
         --variants '[{"multipath": {"scale": 0.1}}, {"multipath": {"scale": 1.0}}]'
-    python -m benchmarks.candidate_scan +experiment=gap_benchmark_36_heldout2 --case palm \\
+    python -m benchmarks.candidate_scan +experiment=gap_benchmark world=heldout2 benchmark.size=36 --case palm \\
         --variants '[{"palm": {}}, {"palm_lobe": {"rcs0_m2": 0.03, "m": 1.0}}]'
-    python -m benchmarks.candidate_scan +experiment=gap_benchmark_36 --case nothing --grids
-    python -m benchmarks.candidate_scan +experiment=gap_benchmark_heldout3 --case nothing --exponent 0.1 \\
+    python -m benchmarks.candidate_scan +experiment=gap_benchmark benchmark.size=36 --case nothing --grids
+    python -m benchmarks.candidate_scan +experiment=gap_benchmark world=heldout3 --case nothing --exponent 0.1 \\
         --variants '[{"occlusion": {"transmission": 0.0}}]' --halves 6
 """
 
@@ -106,7 +106,7 @@ def best_per_effect(rows: list[dict]) -> dict[str, dict]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("overrides", nargs="*", help="diagnose.py overrides, e.g. +experiment=gap_benchmark_36")
+    ap.add_argument("overrides", nargs="*", help="diagnose.py overrides, e.g. +experiment=gap_benchmark benchmark.size=36")
     ap.add_argument("--case", required=True, help="the benchmark case (a withheld effect) whose world is scanned")
     ap.add_argument("--variants", help="JSON list of variants, [{effect: {param: value}}, ...]")
     ap.add_argument("--grids", action="store_true", help="every vocabulary effect over its documented grid")

@@ -19,8 +19,8 @@ The coherent sum of reflections whose relative ranges are known only to a fracti
 wavelength has its interference pattern drawn at random: an effect whose change is mostly such a
 pattern leaves nothing that a candidate can reproduce row by row (README, "How visible each effect is").
 
-    python -m benchmarks.phase_twin +experiment=gap_benchmark_36
-    python -m benchmarks.phase_twin +experiment=gap_benchmark_36_heldout2 --deltas 0.00025,0.0005,0.00075,0.001
+    python -m benchmarks.phase_twin +experiment=gap_benchmark benchmark.size=36
+    python -m benchmarks.phase_twin +experiment=gap_benchmark world=heldout2 benchmark.size=36 --deltas 0.00025,0.0005,0.00075,0.001
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ def _ci(b) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("overrides", nargs="*", help="diagnose.py overrides, e.g. +experiment=gap_benchmark_36")
+    ap.add_argument("overrides", nargs="*", help="diagnose.py overrides, e.g. +experiment=gap_benchmark benchmark.size=36")
     ap.add_argument("--setting", default="scene.finger_radius_m", help="the shared world setting moved (dotted)")
     ap.add_argument("--deltas", default="0.0005", help="how far it moves (the setting's unit); several, comma-separated: "
                                                         "the twins' mean change")

@@ -18,8 +18,8 @@ another window. The chain picks each row's window from its radar data, so an eff
 the data can move it by tenths of a second, and two rows over other stretches of the motion differ
 by far more than the effect.
 
-    python -m benchmarks.world_signatures +experiment=gap_benchmark_36
-    python -m benchmarks.world_signatures +experiment=gap_benchmark_36_heldout2
+    python -m benchmarks.world_signatures +experiment=gap_benchmark benchmark.size=36
+    python -m benchmarks.world_signatures +experiment=gap_benchmark world=heldout2 benchmark.size=36
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ def calibrated_baseline(sim_cfg, diag: dict, path: Path, effect: str) -> tuple[n
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("overrides", nargs="*", help="diagnose.py overrides, e.g. +experiment=gap_benchmark_36")
+    ap.add_argument("overrides", nargs="*", help="diagnose.py overrides, e.g. +experiment=gap_benchmark benchmark.size=36")
     args = ap.parse_args()
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
         cfg = compose("diagnose", overrides=args.overrides)

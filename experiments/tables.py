@@ -1,15 +1,19 @@
 """Paper-style result tables from the MLflow runs of train.py jobs (``make tables``).
 
-    python -m experiments.tables [--tracking-uri URI] [--out DIR]
+    python -m experiments.tables [--tracking-uri URI] [--out DIR] [--doc FILE]
 
 Reads every FINISHED run tagged by handradar (the latest one per job hash, so a re-run job counts
-once), and writes into DIR (default logs/results):
+once) and writes:
 
-- ``tables.md`` with Tables II (few-shot), III (pre-training) and IV (OOD), each cell the mean ±
-  standard deviation over seeds; ``table2_few_shot.csv`` etc. with mean, std and n columns;
-- ``confusion/<preset>[_fixed]_<variant>.png``: confusion matrices summed over seeds.
+- FILE (default docs/results.md): Tables I (synthesis), II (few-shot), III (pre-training) and IV (OOD),
+  each cell the mean ± standard deviation over seeds, and under each table every row's runs: the
+  command that reproduces them, the commit, the seeds and the machine (the runs' ``handradar.command``
+  and ``handradar.machine`` tags; for runs logged before those tags, the command from the run folder's
+  ``.hydra/overrides.yaml`` where it still exists);
+- into DIR (default logs/results): ``table2_few_shot.csv`` etc. with mean, std and n columns, and
+  ``confusion/<preset>[_fixed]_<variant>.png``, confusion matrices summed over seeds.
 
-The last line printed is the path of tables.md.
+The last line printed is the path of FILE.
 """
 
 from __future__ import annotations
@@ -22,11 +26,12 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from handradar.atomic import atomic_write_text
 from handradar.provenance import REPO_ROOT
 from handradar.runs.mlflow import TAG_PREFIX, Tracker, sqlite_path
-from handradar.runs.tables import build_tables
+from handradar.runs.tables import build_tables, provenance, results_markdown
 
 DEFAULT_URI = f"sqlite:///{REPO_ROOT / 'logs' / 'mlflow' / 'mlflow.db'}"
 log = logging.getLogger(__name__)
@@ -58,9 +63,22 @@ def load_records(tracking_uri: str) -> list[dict]:
         key = tags.get(f"{TAG_PREFIX}job_hash")
         if key is None or key in latest:  # not a handradar job, or an older run of the same job
             continue
-        latest[key] = {"params": dict(run.data.params), "metrics": dict(run.data.metrics), "tags": dict(tags),
-                       "run_id": run.info.run_id}
+        params = dict(run.data.params)
+        latest[key] = {"params": params, "metrics": dict(run.data.metrics), "tags": dict(tags),
+                       "run_id": run.info.run_id, "provenance": provenance(tags, params, job_overrides(tags))}
     return list(latest.values())
+
+
+def job_overrides(tags: dict) -> list[str] | None:
+    """The command-line overrides Hydra kept in the run folder (``.hydra/overrides.yaml``), if it still exists."""
+    path = Path(tags.get(f"{TAG_PREFIX}run_dir", "")) / ".hydra" / "overrides.yaml"
+    if not tags.get(f"{TAG_PREFIX}run_dir") or not path.is_file():
+        return None
+    try:
+        got = yaml.safe_load(path.read_text())
+    except yaml.YAMLError:
+        return None  # an unreadable folder only costs the row its exact command
+    return [str(o) for o in got] if isinstance(got, list) else None
 
 
 def confusion_group(rec: dict) -> str:
@@ -101,24 +119,31 @@ def main(argv: list[str] | None = None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tracking-uri", default=DEFAULT_URI, help=f"MLflow store (default {DEFAULT_URI})")
     ap.add_argument("--out", type=Path, default=REPO_ROOT / "logs" / "results", help="output folder")
+    ap.add_argument("--doc", type=Path, default=REPO_ROOT / "docs" / "results.md", help="the results markdown")
     ap.add_argument("--no-figures", action="store_true", help="skip the confusion-matrix PNGs")
     args = ap.parse_args(argv)
     records = load_records(args.tracking_uri)
     tables = build_tables(records)
     args.out.mkdir(parents=True, exist_ok=True)
-    sections = [f"# handradar results\n\n{len(records)} finished jobs from {args.tracking_uri}\n"]
     for t in tables:
-        sections.append(t.markdown())
         atomic_write_text(args.out / f"{t.name}.csv", t.csv())
-    if not tables:
-        sections.append("(no finished train.py jobs found)")
-    md = args.out / "tables.md"
-    atomic_write_text(md, "\n\n".join(sections) + "\n")
+    db = sqlite_path(args.tracking_uri)
+    source = args.tracking_uri if db is None else _relative(db)
+    md = results_markdown(tables, f"`{source}` ({len(records)} jobs)")
+    atomic_write_text(args.doc, md)
     if not args.no_figures:
         write_confusions(args.tracking_uri, records, args.out)
-    print("\n\n".join(sections[1:]))
-    print(md)
-    return md
+    print(md, end="")
+    print(args.doc)
+    return args.doc
+
+
+def _relative(path: Path) -> str:
+    """``path`` relative to the repository when inside it (the results file names no home folder)."""
+    try:
+        return path.resolve().relative_to(REPO_ROOT).as_posix()
+    except ValueError:
+        return str(path)
 
 
 if __name__ == "__main__":

@@ -4,7 +4,8 @@ An interrupted run (exception, Ctrl-C, SIGTERM through :mod:`handradar.runs.cli`
 partial file at the target path. A killed run (SIGKILL, power loss) leaves its temporary file
 ``.{name}.{pid}@{host}.{random}.part``; the next write of the same target removes it once its
 process is gone (see :func:`remove_stale_parts`). :func:`file_lock` serialises processes that
-build the same file.
+build the same file. Outputs get the permissions a plain ``open(path, "w")`` would give: 0666
+less the umask.
 """
 
 from __future__ import annotations
@@ -59,6 +60,22 @@ def remove_stale_parts(path: str | Path) -> list[Path]:
     return removed
 
 
+def current_umask() -> int:
+    """The process's umask, read from /proc (Linux) without changing it; elsewhere set and restored."""
+    with contextlib.suppress(OSError, ValueError, StopIteration):
+        with open("/proc/self/status") as fh:
+            return int(next(line for line in fh if line.startswith("Umask:")).split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def output_mode() -> int:
+    """Permission bits of every output: what ``open(path, "w")`` gives a new file, 0666 less the umask
+    (mkstemp's 0600 would hide datasets and reports from a group that shares them)."""
+    return 0o666 & ~current_umask()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path in the target's folder; move it onto ``path`` on success only.
@@ -76,6 +93,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}@{_host()}.", suffix=".part", dir=path.parent)
     except OSError as exc:  # e.g. a read-only folder
         raise OSError(exc.errno, exc.strerror, str(path.parent)) from None
+    with contextlib.suppress(OSError):  # mkstemp makes 0600; writers open the temporary file in place
+        os.fchmod(fd, output_mode())  # (a file system without modes keeps its own)
     os.close(fd)
     tmp_path = Path(tmp)
     try:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import re
 import subprocess
 from pathlib import Path
 
@@ -26,6 +27,13 @@ def code_version() -> str:
     except (OSError, subprocess.SubprocessError):
         return __version__
     return f"{__version__}+g{sha}{'.dirty' if dirty else ''}"
+
+
+def commit_of(version: str) -> str:
+    """The short (7-digit) git commit in a ``<version>+g<sha>[.dirty]`` code version (``.dirty`` kept),
+    else the version itself."""
+    m = re.search(r"\+g([0-9a-f]+)(\.dirty)?", version or "")
+    return (m.group(1)[:7] + (m.group(2) or "")) if m else (version or "unknown")
 
 
 def _canonical(obj: object) -> object:
@@ -54,3 +62,21 @@ def array_digest(*arrays: np.ndarray) -> str:
         h.update(str((a.dtype.str, a.shape)).encode())
         h.update(a.tobytes())
     return h.hexdigest()[:16]
+
+
+@functools.cache
+def machine() -> str:
+    """What ran a job, without naming the host: architecture, CPU count and GPU, e.g.
+    ``x86_64, 2 CPUs, no GPU`` or ``x86_64, 16 CPUs, NVIDIA H100 80GB HBM3``."""
+    import os
+    import platform
+
+    gpu = "no GPU"
+    try:
+        import torch
+
+        if torch.cuda.is_available():
+            gpu = torch.cuda.get_device_name(0)
+    except Exception:  # a broken CUDA install must not stop a job from being recorded
+        pass
+    return f"{platform.machine() or 'unknown'}, {os.cpu_count() or '?'} CPUs, {gpu}"

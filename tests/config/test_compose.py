@@ -29,15 +29,16 @@ from tests.tasks.fakes import compose_train
 
 REPO = Path(__file__).resolve().parents[2]
 PRESETS = sorted(p.stem for p in (experiments_dir() / "experiment").glob("*.yaml"))
-DIAGNOSE_PRESETS = {p for p in PRESETS if p.startswith("gap_benchmark")}  # diagnose.py presets: tests/gap/test_cli.py
+DIAGNOSE_PRESETS = {"gap_benchmark"}  # diagnose.py's: tests/gap/test_cli.py, tests/config/test_gap_benchmark_presets.py
 TRAIN_PRESETS = [p for p in PRESETS if p not in DIAGNOSE_PRESETS]
-METRICS = {"few_shot": ["radar_only", "model_synth", "enhanced_synth", "cgan", "synth_only", "model_synth_only",
-                        "radar_pool"]}
+PAPER_VARIANTS = ["radar_only", "model_synth", "enhanced_synth", "model_synth_only"]  # make run's comparison
 
 
 def test_presets_exist():
     assert set(PRESETS) >= {"few_shot_5pct", "few_shot_20pct", "few_shot_50pct", "ood_angle", "ood_subject",
                             "ood_hands", "ood_occlusion", "external_pretrain"}
+    # one benchmark preset: worlds and sizes compose (world=..., benchmark.size=...), no preset per pair
+    assert [p for p in PRESETS if p.startswith("gap_benchmark")] == ["gap_benchmark"]
 
 
 @pytest.mark.parametrize("preset", TRAIN_PRESETS)
@@ -61,7 +62,7 @@ def test_preset_composes_and_instantiates(preset: str, tmp_path: Path):
     sim = SimFactory.from_config(cfg.sim, instantiate(cfg.radar), instantiate(cfg.chain))()
     assert isinstance(sim, Simulator) and not list(sim.effects)  # the paper's model by default
     if cfg.job == "variants":
-        assert list(cfg.variants) == METRICS["few_shot"]
+        assert list(cfg.variants) == PAPER_VARIANTS
         assert cfg.split.kind in ("few_shot", "ood")
     elif preset == "synth_fit":
         assert callable(import_callable(cfg.job))
@@ -152,3 +153,23 @@ def test_experiment_from_any_working_directory(tmp_path: Path):
 def test_logger_none_is_a_disabled_tracker():
     tracker = instantiate(compose_train(["logger=none"]).logger)
     assert isinstance(tracker, Tracker) and not tracker.enabled and tracker.start() is None
+
+
+def test_smoke_debug_config_overrides_the_preset():
+    """make smoke: +debug=smoke after the preset shrinks the world, the variants and the steps."""
+    cfg = compose_train(["+experiment=few_shot_5pct", "+debug=smoke"])
+    assert cfg.task_name == "smoke" and cfg.split.fraction == 0.34 and cfg.split.test == "fixed"
+    assert list(cfg.variants) == ["radar_only", "model_synth", "model_synth_only"]
+    assert cfg.trainer.max_steps == 30 and cfg.synth.fit_sim == "effects"
+    n = len(cfg.world.gestures) * cfg.world.subjects * len(cfg.world.angles_deg) * cfg.world.repetitions
+    assert n == 60
+
+
+def test_variants_all_names_every_variant():
+    from handradar.tasks.train import VARIANTS, variant_names
+
+    cfg = compose_train(["+experiment=ood_hands", "variants=all"])
+    assert variant_names(cfg.variants) == list(VARIANTS)
+    with pytest.raises(ValueError, match="unknown variant 'radar'.*variants=all"):
+        variant_names(["radar"])
+

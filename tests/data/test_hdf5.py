@@ -92,7 +92,12 @@ def test_fuzz_ingest_strict_corrupt_file(tmp_path, radar, chain, template, name,
     try:
         ingest(work / "recs", out, chain, strict=True, progress=False)
     except FormatError as exc:
-        assert "rec" in str(exc)
+        # the error names a file of this recording: the corrupted one, or another whose mismatch with
+        # it the problem names (a changed .cfg makes adc_data.bin's size wrong "for the .cfg")
+        assert exc.path is not None and exc.path.parent == path.parent, str(exc)
+        assert exc.path.name in ("radar.cfg", "leap.jsonl", "meta.json", "adc_data.bin"), str(exc)
+        assert exc.path.name == name or name.rsplit(".", 1)[1] in exc.problem, str(exc)
+        assert str(exc).startswith(f"{exc.path}:") and exc.problem.strip()
         assert not out.parent.exists() or list(out.parent.iterdir()) == []
         return
     assert validate(out) == 1 and sorted(p.name for p in out.parent.iterdir()) == ["d.checks.json", "d.h5"]

@@ -21,6 +21,7 @@ from handradar.errors import FormatError
 from handradar.radar.chain import ChainConfig
 from handradar.vocab import GESTURES
 from tests.data.writer import Scene, expected_doppler_row, write_recording
+from tests.unprivileged import drop_privileges
 
 REPO = Path(__file__).resolve().parents[2]
 SCRIPT = Path(sys.executable).parent / "handradar-ingest"
@@ -34,10 +35,12 @@ GOOD = {
 }
 
 
-def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+def run_cli(*args: str, cwd: Path, unprivileged: bool = False) -> subprocess.CompletedProcess:
+    """handradar-ingest ``args``; unprivileged: as a user the mode bits bind (tests/unprivileged.py)."""
     env = {**os.environ, "PYTHONPATH": str(REPO / "src") + os.pathsep + os.environ.get("PYTHONPATH", "")}
     return subprocess.run([str(SCRIPT), *args, f"hydra.run.dir={cwd / 'hydra'}"], cwd=cwd, env=env,
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=300,
+                          preexec_fn=drop_privileges() if unprivileged else None)
 
 
 @pytest.fixture()
@@ -190,10 +193,10 @@ def test_odd_configuration_sorting_first_does_not_win(root, tmp_path):
 def test_tied_configurations_keep_the_first_in_sorted_order(tmp_path, changed):
     """Two configurations, two recordings each: the one of recording a (first in sorted order) is the reference."""
     for name in "abcd":
-        p = write_recording(tmp_path / name, Scene(gesture="circle"))
+        p = write_recording(tmp_path / "recs" / name, Scene(gesture="circle"))
         if name in changed:
             _set_cfg(p, "profileCfg 0 77 338.8", "profileCfg 0 76.5 300")
-    summary = ingest(tmp_path, tmp_path / "t.h5", ChainConfig(), progress=False)
+    summary = ingest(tmp_path / "recs", tmp_path / "t.h5", ChainConfig(), progress=False)  # out outside the input
     assert summary.written == 2 and [n for n, _ in summary.skipped] == ["b", "c"]
     here, there = ("7.65e+10", "0.0003"), ("7.7e+10", "0.0003388")
     if changed == "ad":
@@ -257,13 +260,12 @@ def test_cli_output_under_a_file_fails_in_one_line(root, tmp_path):
         assert proc.stderr.splitlines()[-1] == f"error: {blocker}: Not a directory (nothing written to {out})"
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
 def test_cli_read_only_output_folder_fails_in_one_line(root, tmp_path):
     folder = tmp_path / "ro"
     folder.mkdir()
     folder.chmod(0o500)
-    try:
-        proc = run_cli(f"root={root}", f"out={folder / 'x.h5'}", cwd=tmp_path)
+    try:  # unprivileged: root writes into read-only folders
+        proc = run_cli(f"root={root}", f"out={folder / 'x.h5'}", cwd=tmp_path, unprivileged=True)
     finally:
         folder.chmod(0o700)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr

@@ -25,10 +25,10 @@ F0_HZ, IDLE_S, ADC_START_S, RAMP_END_S, SLOPE_HZ_S = 77e9, 338.8e-6, 6e-6, 51.2e
 N_SAMPLES, FS_HZ, N_LOOPS, PERIOD_S = 256, 10e6, 128, 0.1
 
 
-def cfg_text(n_frames: int) -> str:
+def cfg_text(n_frames: int, n_rx: int = 1) -> str:
     return ("% written by the test's independent writer\n"
             "sensorStop\nflushCfg\ndfeDataOutputMode 1\n"
-            "channelCfg 1 1 0\n"
+            f"channelCfg {(1 << n_rx) - 1} 1 0\n"
             "adcCfg 2 1\n"
             "adcbufCfg -1 0 1 1 1\n"
             "profileCfg 0 77 338.8 6 51.2 0 0 76.22 1 256 10000 0 0 30\n"
@@ -70,9 +70,12 @@ def if_signal(ranges_m: np.ndarray, amplitude: float, *, swap_iq: bool = False,
     return sig.imag + 1j * sig.real if swap_iq else sig
 
 
-def adc_bytes(ranges_m: np.ndarray, amplitude: float, *, swap_iq: bool = False, mirror_doppler: bool = False) -> bytes:
-    """One reflector at ``ranges_m`` (frames, loops) -> DCA1000 bytes (1 RX)."""
+def adc_bytes(ranges_m: np.ndarray, amplitude: float, *, swap_iq: bool = False, mirror_doppler: bool = False,
+              rx_gains: tuple[float, ...] = (1.0,)) -> bytes:
+    """One reflector at ``ranges_m`` (frames, loops) -> DCA1000 bytes, one RX per entry of ``rx_gains``
+    (its amplitude factor; 0: a dead channel), RX-major within each chirp."""
     sig = if_signal(ranges_m, amplitude, swap_iq=swap_iq, mirror_doppler=mirror_doppler)
+    sig = sig[..., None, :] * np.asarray(rx_gains, dtype=np.float64)[:, None]  # (frames, loops, rx, samples)
     i = np.rint(sig.real).astype("<i2").reshape(-1, N_SAMPLES // 2, 2)
     q = np.rint(sig.imag).astype("<i2").reshape(-1, N_SAMPLES // 2, 2)
     return np.concatenate([i, q], axis=-1).tobytes()  # I(n) I(n+1) Q(n) Q(n+1)
@@ -101,12 +104,14 @@ class Scene:
     leap_scale: float = 1.0  # multiplies the Leap coordinates written (0.001: metres instead of millimetres)
     swap_iq: bool = False  # I and Q exchanged in adc_data.bin
     mirror_doppler: bool = False  # carrier phase of the wrong sign (if_signal)
+    x0_m: float = 0.0  # hand centre across boresight (radar x)
+    rx_gains: tuple[float, ...] = (1.0,)  # one RX channel per entry, its amplitude factor (0: dead)
     extra_meta: dict = field(default_factory=dict)
 
     def centre(self, t: np.ndarray) -> np.ndarray:
         a, b = self.move_span_s
         z = self.z0_m + self.velocity_m_s * (np.clip(t, a, b) - a)
-        return np.stack([np.zeros_like(t), np.zeros_like(t), z], axis=-1)
+        return np.stack([np.full_like(t, self.x0_m), np.zeros_like(t), z], axis=-1)
 
     def joints(self, t: np.ndarray) -> np.ndarray:
         """(len(t), 21, 3) radar-frame joints; the template's hand centre rides on ``centre(t)``."""
@@ -132,10 +137,11 @@ def leap_frame(i: int, ts_us: int, joints_radar: np.ndarray, scale: float = 1.0)
 
 def write_recording(folder: Path, scene: Scene) -> Path:
     folder.mkdir(parents=True)
-    (folder / "radar.cfg").write_text(cfg_text(scene.n_frames))
+    (folder / "radar.cfg").write_text(cfg_text(scene.n_frames, len(scene.rx_gains)))
     ranges = np.linalg.norm(scene.centre(chirp_times(scene.n_frames)), axis=-1)
     (folder / "adc_data.bin").write_bytes(adc_bytes(ranges, scene.amplitude, swap_iq=scene.swap_iq,
-                                                              mirror_doppler=scene.mirror_doppler))
+                                                              mirror_doppler=scene.mirror_doppler,
+                                                              rx_gains=scene.rx_gains))
     t = np.arange(scene.leap_span_s[0], scene.leap_span_s[1], 1 / scene.leap_rate_hz)
     joints = scene.joints(t)
     with (folder / "leap.jsonl").open("w") as fh:

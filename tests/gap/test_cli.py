@@ -18,9 +18,9 @@ from omegaconf import OmegaConf
 from handradar.config import VERSION_BASE, config_dir
 from handradar.data.datasets import ReferenceWorld
 from handradar.errors import FormatError
-from handradar.gap.benchmark import OUTPUT_KEYS
+from handradar.gap.benchmark import OUTPUT_KEYS, benchmark_world
 from handradar.gap.report import fitted_simulator, validate_report
-from handradar.runs.hydra import command_line
+from handradar.runs.hydra import command_line, group_choice
 from handradar.sim.factory import SimFactory
 from tests.data.writer import Scene, write_recording
 from tests.tasks.fakes import compose_train
@@ -36,17 +36,20 @@ def _compose(overrides):
 def test_benchmark_names_the_command_that_reproduces_it_without_output_locations():
     """The results file's command: the job's overrides as typed (shell-quoted), minus where outputs go."""
     assert command_line("diagnose.py", OUTPUT_KEYS) is None  # outside a Hydra job
-    overrides = ["+experiment=gap_benchmark_heldout2", "diagnose.noise_floor=true", "diagnose.coherences=[1.0,0.5]",
-                 "benchmark.state_dir=/tmp/st", "benchmark.results_md=/tmp/r.md", "progress=false"]
+    overrides = ["+experiment=gap_benchmark", "world=heldout2", "benchmark.size=36", "diagnose.noise_floor=true",
+                 "diagnose.coherences=[1.0,0.5]", "benchmark.state_dir=/tmp/st", "benchmark.record_dir=/tmp/r",
+                 "progress=false"]
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
         cfg = compose("diagnose", overrides=overrides, return_hydra_config=True)
     HydraConfig.instance().set_config(cfg)
     try:
         cmd = command_line("diagnose.py", OUTPUT_KEYS)
+        world = group_choice("world")  # names the benchmark's record (heldout2_36.json) and its MLflow run
     finally:
         HydraConfig.instance().cfg = None  # other tests run outside a Hydra job
-    assert cmd == ("python diagnose.py +experiment=gap_benchmark_heldout2 diagnose.noise_floor=true "
-                   "'diagnose.coherences=[1.0,0.5]'")
+    assert cmd == ("python diagnose.py +experiment=gap_benchmark world=heldout2 benchmark.size=36 "
+                   "diagnose.noise_floor=true 'diagnose.coherences=[1.0,0.5]'")
+    assert world == "heldout2" and group_choice("world") is None  # outside a Hydra job: not known
 
 
 def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chain):
@@ -64,37 +67,58 @@ def test_default_config_and_benchmark_preset_compose_and_instantiate(radar, chai
     assert b.benchmark.builder == "handradar.world.build_world_dataset"
     assert len(b.benchmark.cases) == 10 and {"nothing", "iq_imbalance"} <= set(b.benchmark.cases)
     assert SimFactory.from_config(b.sim, radar, chain)({}).hand.sections == 10  # the preset's coarser visibility mesh
-    # the held-out preset: the same frozen diagnosis on the held-out world's physics
-    h = _compose(["+experiment=gap_benchmark_heldout"])
-    OmegaConf.resolve(h)
-    assert h.diagnose == b.diagnose and h.sim == b.sim and h.hand == b.hand and h.benchmark.cases == b.benchmark.cases
-    assert h.world.seed != b.world.seed and h.world.scene != b.world.scene and h.world.effects != b.world.effects
-    assert h.benchmark.results_md.endswith("gap_benchmark_heldout.md") and h.benchmark.figure != b.benchmark.figure
-    # the 36-recording presets: the frozen diagnosis (diagnose.folds=auto cross-fits them), 6 x 2 x 3 recordings per case
-    s, sh = _compose(["+experiment=gap_benchmark_36"]), _compose(["+experiment=gap_benchmark_36_heldout"])
-    OmegaConf.resolve(s), OmegaConf.resolve(sh)
-    assert s.diagnose == b.diagnose and b.diagnose.folds == "auto" and s.sim == b.sim and s.benchmark.cases == b.benchmark.cases
-    w = s.benchmark.world
-    assert len(w.gestures) * w.subjects * len(s.world.angles_deg) * w.repetitions == 36
-    assert sh.diagnose == s.diagnose and sh.benchmark.world == w and sh.world.seed == h.world.seed
-    # the test suite's second held-out world: the same frozen diagnosis, physics unlike both other worlds
-    h2, sh2 = _compose(["+experiment=gap_benchmark_heldout2"]), _compose(["+experiment=gap_benchmark_36_heldout2"])
-    OmegaConf.resolve(h2), OmegaConf.resolve(sh2)
-    assert h2.diagnose == b.diagnose and h2.sim == b.sim and h2.hand == b.hand and h2.benchmark.cases == b.benchmark.cases
-    assert sh2.diagnose == s.diagnose and sh2.benchmark.world == w and sh2.world == h2.world
-    for other in (b, h):
-        assert h2.world.seed != other.world.seed and h2.world.scene != other.world.scene
-        assert h2.world.kinematics != other.world.kinematics and h2.world.effects != other.world.effects
-    # the third held-out world (36 recordings only): the same frozen diagnosis, physics unlike the other three
-    h3, sh3 = _compose(["+experiment=gap_benchmark_heldout3"]), _compose(["+experiment=gap_benchmark_36_heldout3"])
-    OmegaConf.resolve(h3), OmegaConf.resolve(sh3)
-    assert h3.diagnose == b.diagnose and h3.sim == b.sim and h3.hand == b.hand and h3.benchmark.cases == b.benchmark.cases
-    assert sh3.diagnose == s.diagnose and sh3.sim == s.sim and sh3.benchmark.world == w and sh3.world == h3.world
-    for other in (b, h, h2):
-        assert sh3.world.seed != other.world.seed and sh3.world.scene != other.world.scene
-        assert sh3.world.kinematics != other.world.kinematics and sh3.world.effects != other.world.effects
-    presets = (b, h, s, sh, h2, sh2, h3, sh3)
-    assert len({m.benchmark.results_md for m in presets}) == 8 and len({m.benchmark.figure for m in presets}) == 8
+    # every (world, size): the same frozen diagnosis; only the world's physics and the size's recordings change
+    runs = {(w, n): _compose(["+experiment=gap_benchmark", f"world={w}", f"benchmark.size={n}"])
+            for w in ("default", "heldout", "heldout2", "heldout3") for n in (240, 36)}
+    for (w, n), c in runs.items():
+        OmegaConf.resolve(c)
+        assert c.diagnose == b.diagnose and c.sim == b.sim and c.hand == b.hand and c.benchmark.cases == b.benchmark.cases
+        assert c.job == b.job and c.benchmark.strengths == b.benchmark.strengths
+    assert b.diagnose.folds == "auto"  # 36 rows are cross-fitted by the frozen setting itself, not by the size
+    worlds = {k: benchmark_world(c) for k, c in runs.items()}
+    for (w, n), world in worlds.items():
+        assert len(world["gestures"]) * world["subjects"] * len(world["angles_deg"]) * world["repetitions"] == n
+        assert {k: v for k, v in world.items() if k not in ("gestures", "subjects", "repetitions")} == \
+               {k: v for k, v in worlds[(w, 240)].items() if k not in ("gestures", "subjects", "repetitions")}
+        assert (world["subjects"], world["repetitions"]) == ((4, 2) if n == 240 else (2, 1))
+    # the four worlds' physics differ pairwise on every axis the diagnosis could have been tuned to
+    names = ("default", "heldout", "heldout2", "heldout3")
+    for i, a in enumerate(names):
+        for other in names[i + 1:]:
+            wa, wb = worlds[(a, 36)], worlds[(other, 36)]
+            assert wa["seed"] != wb["seed"] and wa["scene"] != wb["scene"] and wa["effects"] != wb["effects"]
+            assert wa["kinematics"] != wb["kinematics"] and wa["leap"] != wb["leap"]
+
+
+def test_diagnose_command_on_recordings_fast(tmp_path):
+    """The fast version of the test below: 8 recordings of the independent writer (a rigid hand whose
+    centre is one point reflector, moving along boresight), 4-frame windows, one split, one
+    candidate, no RadarWeightNet, no MLflow. The writer's single reflector at the hand centre is what
+    the palm effect adds to the bones: palm is named and closes most of the gap (measured +0.979
+    [+0.964, +0.988]; noise, when a candidate too, -0.10), and the fitted simulator keeps it."""
+    root = tmp_path / "recordings"
+    for i in range(8):
+        write_recording(root / f"rec{i}", Scene(gesture=("grasp", "circle")[i % 2], subject=f"s{i % 3}",
+                                                velocity_m_s=-0.08 - 0.02 * i, repetition=i))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO / "src"), str(REPO)])}
+    args = [sys.executable, str(REPO / "diagnose.py"), f"data.root={root}", f"paths.log_dir={tmp_path / 'logs'}",
+            f"paths.cache_dir={tmp_path / 'cache'}", "progress=false", "logger=none", "chain.n_columns=8",
+            "diagnose.candidates=[palm]", "diagnose.folds=1", "diagnose.fit_rows=null", "diagnose.n_boot=200",
+            "diagnose.radarweightnet=false", "diagnose.rcs_exponents=[1.0]", "hand.sections=8", "hand.rings=9"]
+    done = subprocess.run(args, capture_output=True, text=True, cwd=tmp_path, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    path = Path(done.stdout.strip().splitlines()[-1])  # the report's path is the last line
+    assert path.name == "gap_report.json" and path.is_file()
+    rep = json.loads(path.read_text())
+    validate_report(rep, n_columns=8)
+    assert rep["settings"]["folds"] == 1 and (rep["n_calibration"], rep["n_evaluation"]) == (4, 4)
+    palm = next(c for c in rep["candidates"] if c["effect"] == "palm")
+    assert rep["cause"] == "palm" and palm["gap_closed"] > 0.5 and palm["ci95"][0] > 0.5, rep["candidates"]
+    assert OmegaConf.load(path.parent / "fitted_sim.yaml").effects == ["palm"]
+    md = (path.parent / "gap_report.md").read_text()
+    assert "**Cause: palm**" in md
+    figures = [line.split("(")[1].rstrip(")") for line in md.splitlines() if line.startswith("![")]
+    assert figures and all((path.parent / f).is_file() for f in figures)
 
 
 @pytest.mark.slow

@@ -84,28 +84,36 @@ def test_null_data_give_none(radar, short_chain):
     assert all(c["speckle"]["gap_closed"] <= 1e-6 for c in rep["candidates"])
 
 
-def test_gap_outside_the_vocabulary_names_no_effect(radar, short_chain, tmp_path):
+# The noise candidate's own draws (Noise seed; 4 draws averaged) decide the verdict on the IQ-mirror
+# gap of data seed 2. Measured for noise seeds 0-4 (0, 1 and 4 tested): gap_closed +0.006 [-0.011,
+# +0.022] inconclusive, +0.032 [+0.002, +0.068] noise, +0.023 [+0.004, +0.042] noise, +0.016 [+0.003,
+# +0.030] inconclusive, +0.026 [-0.003, +0.054] inconclusive; on data seeds 3 and 4, all five noise
+# seeds give inconclusive or none.
+NOISE_NAMED = "known false positive: a noise floor closes part of any low-level gap, and with these noise " \
+              "draws its CI clears 0 and min_gap_closed (docs/gap_validation.md, 'Noise as a generic closer')"
+
+
+@pytest.mark.parametrize("noise_seed", [0, pytest.param(1, marks=pytest.mark.xfail(strict=True, reason=NOISE_NAMED)), 4])
+def test_gap_outside_the_vocabulary_names_no_effect(radar, short_chain, tmp_path, monkeypatch, noise_seed):
     # a receiver IQ imbalance (mirror image at the opposite Doppler): no candidate effect makes it
     # 24 rows: a percentile bootstrap over a handful of evaluation rows is too narrow to trust
+    monkeypatch.setattr(REGISTRY["noise"].__init__, "__defaults__", (noise_seed, 1))  # the candidate's draws
     data = gap_data(radar, short_chain, 24, {}, seed=2, distort=lambda s: s + 0.3 * s.conj())
     rep = run(radar, short_chain, data).report
+    validate_report(rep, n_columns=short_chain.n_columns)
     assert rep["baseline"]["ssim"] < 0.99  # there is a gap ...
     assert not any(c["significant"] for c in rep["candidates"])  # ... that nothing in the vocabulary explains
-    # "inconclusive", not "none", is the right verdict on 12 evaluation rows: the leader (noise, the
-    # generic floor gain of about +0.006) has a CI [-0.012, +0.021] that still reaches past
-    # min_gap_closed = 0.02, so the data cannot yet show that no candidate is relevant; what would
-    # show it is the upper bound falling below 0.02, for which more rows than these are needed.
-    # Known weakness (README, "noise as a generic closer"): this holds for the default noise seed.
-    # The noise candidate's 4 draws decide it: with noise seeds 0-3 its gap_closed is +0.007, +0.022,
-    # +0.019, +0.034 (seed 3 names noise), and its expectation in closed form (noise_draws=0) closes
-    # +0.026 [+0.010, +0.038]: a noise floor closes part of any low-level gap
-    assert rep["cause"] == "inconclusive"
-    ev = rep["evidence"]
-    assert ev["leader"] == "noise" and "upper 95 % bound" in ev["decides"]
-    assert ev["evaluation_rows_needed"] > rep["n_evaluation"] and ev["recordings_needed"] > len(data)
-    validate_report(rep, n_columns=short_chain.n_columns)
-    md = render(rep, {}, tmp_path)
-    assert "**Cause: inconclusive**" in md and f"About {ev['recordings_needed']} recordings" in md
+    assert rep["cause"] in ("none", "inconclusive"), rep["evidence"]
+    if rep["cause"] == "inconclusive":
+        # on 12 evaluation rows the leader's CI reaches past min_gap_closed = 0.02 (seed 0) or down to 0
+        # (seed 4): more rows would show its upper bound below 0.02, or its CI above 0 and its lead
+        ev, top = rep["evidence"], rep["candidates"][0]
+        assert ev["leader"] == top["effect"] == "noise"
+        below = top["gap_closed"] < 0.02
+        assert ("upper 95 % bound" in ev["decides"]) == below and ("CI of gap_closed above 0" in ev["decides"]) != below
+        assert ev["evaluation_rows_needed"] > rep["n_evaluation"] and ev["recordings_needed"] > len(data)
+        md = render(rep, {}, tmp_path)
+        assert "**Cause: inconclusive**" in md and f"About {ev['recordings_needed']} recordings" in md
 
 
 def test_split_is_seeded_stratified_and_disjoint():

@@ -1,4 +1,4 @@
-"""Effect-model changes made for the gap diagnosis (listed in docs/gap_benchmark.md)."""
+"""Effect-model changes made for the gap diagnosis (listed in docs/gap_report.md)."""
 
 from __future__ import annotations
 

@@ -114,21 +114,49 @@ def test_far_contrast_credits_a_white_floor_and_not_a_spread():
     assert far_contrast(measured[:2], before[:2], white[:2]) is None  # too few rows to say anything
 
 
-def test_a_noise_candidate_named_for_a_gap_it_did_not_make_is_not_specific(radar, short_chain):
-    """Noise credited in noisy data comes far from the returns; on an IQ mirror image (no noise in the
-    data), where noise's exact expectation closes a generic part and is named, its credit comes next to
-    the returns only: the evidence tells the two apart (measured: contrast +0.0025 and -0.00018)."""
-    cfg = DiagnosisConfig(candidates=["noise", "palm"], radarweightnet=False, n_boot=500, noise_draws=0)
-    noisy = gap_data(radar, short_chain, 24, {"noise": {"snr_db": 10.0}}, seed=2)
-    mirror = gap_data(radar, short_chain, 24, {}, seed=2, distort=lambda s: s + 0.3 * s.conj())
-    out = {}
-    for name, data in (("noisy", noisy), ("mirror", mirror)):
-        rep = diagnose(data, builder(radar, short_chain), {}, cfg, progress=False).report
+_NOISE_REPORTS: dict[tuple[str, int], dict] = {}
+
+
+def _noise_report(radar, chain, kind: str, seed: int) -> dict:
+    """The validated report of noise vs palm (noise at its closed-form expectation) on 24 rows of data
+    seed ``seed``: "noisy" (noise at 10 dB SNR) or "mirror" (an IQ mirror image, no noise); cached."""
+    if (kind, seed) not in _NOISE_REPORTS:
+        cfg = DiagnosisConfig(candidates=["noise", "palm"], radarweightnet=False, n_boot=500, noise_draws=0)
+        data = (gap_data(radar, chain, 24, {"noise": {"snr_db": 10.0}}, seed=seed) if kind == "noisy" else
+                gap_data(radar, chain, 24, {}, seed=seed, distort=lambda s: s + 0.3 * s.conj()))
+        rep = diagnose(data, builder(radar, chain), {}, cfg, progress=False).report
         validate_report(rep, n_doppler=data.measured.shape[1], n_columns=data.measured.shape[2])
-        out[name] = (rep["cause"], next(c for c in rep["candidates"] if c["effect"] == "noise")["specificity"])
-    assert out["noisy"][0] == "noise" and out["noisy"][1]["specific"] and out["noisy"][1]["factor"] == "far_from_returns"
-    assert out["mirror"][0] == "noise"  # the known weakness (README, "noise as a generic closer") ...
-    assert not out["mirror"][1]["specific"] and out["mirror"][1]["ci95"][1] < 0  # ... which the evidence flags
+        _NOISE_REPORTS[kind, seed] = rep
+    return _NOISE_REPORTS[kind, seed]
+
+
+def _noise(rep: dict) -> dict:
+    return next(c for c in rep["candidates"] if c["effect"] == "noise")["specificity"]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_noise_candidate_named_for_a_gap_it_did_not_make_is_not_specific(radar, short_chain, seed):
+    """Noise credited in noisy data comes far from the returns; on an IQ mirror image (no noise in the
+    data), where noise's exact expectation closes a generic part, its credit comes next to the returns
+    only: the evidence tells the two apart on every data seed (measured, seeds 1-5: far-minus-near
+    contrast CI above 0 on noisy data, lower bound +0.0005 to +0.0016; below 0 on the mirror, upper
+    bound -0.00003 to -0.00008)."""
+    noisy_report = _noise_report(radar, short_chain, "noisy", seed)
+    noisy, mirror = _noise(noisy_report), _noise(_noise_report(radar, short_chain, "mirror", seed))
+    assert noisy_report["cause"] == "noise"
+    assert noisy["specific"] and noisy["factor"] == "far_from_returns" and noisy["ci95"][0] > 0
+    assert not mirror["specific"] and mirror["ci95"][1] < 0
+
+
+# measured on data seeds 1-5: the mirror's cause is inconclusive, noise, inconclusive, none, inconclusive
+MIRROR_NAMES_NOISE = ("known false positive (docs/gap_validation.md, 'Noise as a generic closer'): on data seed 2 noise's "
+                      "expectation closes +0.033 [+0.012, +0.061] of the IQ-mirror gap and is named; the "
+                      "specificity evidence flags it but is not part of the verdict")
+
+
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.xfail(strict=True, reason=MIRROR_NAMES_NOISE)), 3])
+def test_an_iq_mirror_gap_is_not_credited_to_noise(radar, short_chain, seed):
+    assert _noise_report(radar, short_chain, "mirror", seed)["cause"] != "noise"
 
 
 @pytest.mark.slow

@@ -68,3 +68,28 @@ def test_samples_are_class_conditional(trained_generator):
     assert (nearest == y).mean() >= 0.9, np.bincount(nearest * 3 + y, minlength=9).reshape(3, 3)
     # and the samples resemble the data, not just the right side of a boundary
     assert dist[np.arange(len(y)), y].mean() < 0.5 * dist[np.arange(len(y)), (y + 1) % 3].mean()
+
+
+def test_small_cgan_learns_class_conditioning_fast(seed=0):
+    """The fast version of the class-conditioning test: the same training module on 16 x 8 patterns
+    (the fake spectrograms at every 4th row and column) with a smaller generator and discriminator,
+    300 optimizer steps (~2 s). Measured, seeds 0-2: all 90 samples nearest their own class mean,
+    distance ratio 0.20-0.29; a generator that ignores its label scores 1/3."""
+    shape = (1, 16, 8)
+    rng = np.random.default_rng(seed)
+    y = np.repeat(np.arange(3), 20)
+    x = np.stack([class_pattern((0, 4, 8)[c], rng)[::4, ::4] for c in y])
+    pl.seed_everything(seed, verbose=False)
+    module = CGANModule(Generator(3, latent_dim=16, hidden=(64, 128, 256), shape=shape),
+                        Discriminator(3, hidden=(128, 64), label_units=16, shape=shape), lr=2e-3)
+    trainer = pl.Trainer(accelerator="cpu", max_steps=300, logger=False, enable_checkpointing=False,
+                         enable_progress_bar=False, enable_model_summary=False, callbacks=[StepSeed(seed)])
+    trainer.fit(module, datamodule=TrainingRowsDataModule([ArrayRows(x, y)], batch_size=20, seed=seed))
+    means = np.stack([x[y == c].mean(0) for c in range(3)])
+    labels = torch.arange(3).repeat_interleave(30)
+    samples = module.generator.sample(labels, seed=3)[:, 0].numpy()
+    assert samples.shape == (90, 16, 8) and samples.min() >= 0 and samples.max() <= 1
+    dist = ((samples[:, None] - means[None]) ** 2).mean(axis=(2, 3))
+    y_s = labels.numpy()
+    assert (dist.argmin(1) == y_s).mean() >= 0.9
+    assert dist[np.arange(90), y_s].mean() < 0.5 * dist[np.arange(90), (y_s + 1) % 3].mean()

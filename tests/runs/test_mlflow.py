@@ -16,6 +16,7 @@ from handradar.runs.mlflow import (
     sqlite_path,
     tracked_run,
 )
+from handradar.provenance import machine
 from handradar.training import TrackerLogger
 
 
@@ -124,6 +125,8 @@ def test_a_reviewer_tells_runs_apart_in_the_dashboard(tmp_path: Path):
     assert [(d[0].dataset.name, d[0].dataset.digest) for d in inputs] == [("lab_a", "aaaa1111"), ("lab_b", "bbbb2222")]
     assert inputs[0][0].tags[0].value == "training" and "recordings-aaaa1111.h5" in inputs[0][0].dataset.source
     assert all(r.data.tags["handradar.preset"] == "diagnose" and r.info.status == "FINISHED" for r in runs)
+    # every run says what ran it (make tables prints it beside the result); outside Hydra there is no command
+    assert all(r.data.tags["handradar.machine"] == machine() and "handradar.command" not in r.data.tags for r in runs)
     # a file named by data.path is named after its stem; the world's cached file after itself
     assert DataRef.of({"path": "/x/my_capture.h5"}, "/x/my_capture.h5", "d").name == "my_capture"
     assert DataRef.of({}, "/cache/world/world-0123abcd.h5", "d").name == "world-0123abcd"

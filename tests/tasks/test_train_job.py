@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -22,11 +23,17 @@ def _state(run_dir: Path, tmp: Path, preset: str) -> Path:
     return state
 
 
-def test_few_shot_job_end_to_end(fake_data: Path, tmp_path: Path):
+def test_few_shot_job_end_to_end(fake_data: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture):
     fakes.CALLS.clear()
     cfg = compose_train(["+experiment=few_shot_50pct", "split.test=remainder", f"variants=[{','.join(FOUR)}]",
                          *fake_overrides(fake_data, tmp_path), "trainer.max_steps=30", "data.batch_size=16"])
-    run_dir = run(cfg, run_dir=tmp_path / "run")
+    with caplog.at_level(logging.INFO, logger="handradar.runs.progress"):
+        run_dir = run(cfg, run_dir=tmp_path / "run")
+    # progress: every planned stage numbered, in order, what it adds made before the variants train on it
+    starts = [m.split(" (elapsed")[0] for m in caplog.messages if "(elapsed" in m]
+    assert starts == [f"[{i}/9] {s}" for i, s in enumerate(
+        ["data", "synthesis (model-based)", "synthesis (RadarWeightNet)", "CGAN samples", *FOUR, "summary"], 1)]
+    assert (run_dir / "figures" / "summary.png").stat().st_size > 5000
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert set(metrics) == {f"test/acc_{v}" for v in FOUR}
     assert all(0.0 <= v <= 1.0 for v in metrics.values())
@@ -81,7 +88,8 @@ def test_transfer_variants_train_on_synthetic_alone_and_on_the_pool(fake_data: P
 
 def test_ood_hands_job(fake_data: Path, tmp_path: Path):
     fakes.CALLS.clear()
-    cfg = compose_train(["+experiment=ood_hands", "trainer.fast_dev_run=true", *fake_overrides(fake_data, tmp_path)])
+    cfg = compose_train(["+experiment=ood_hands", "variants=all", "trainer.fast_dev_run=true",
+                         *fake_overrides(fake_data, tmp_path)])
     run_dir = run(cfg, run_dir=tmp_path / "run")
     assert set(json.loads((run_dir / "metrics.json").read_text())) == VARIANT_METRICS
     split = np.load(_state(run_dir, tmp_path, "ood_hands") / "split.npz")

@@ -175,6 +175,30 @@ def test_two_workers_give_the_same_dataset(world, radar, chain, tmp_path):
             np.testing.assert_array_equal(a[key][:], b[key][:])
 
 
+def test_two_pool_workers_give_the_same_dataset_fast(world, radar, short_chain, tmp_path, monkeypatch):
+    """The fast version of the test above: the same pool code path with two thread workers in place of
+    spawned processes (whose start-up, ~7 s each, is all the slow test adds). Threads run the rows
+    interleaved in one process, so a row that drew from shared random state, or results taken in
+    completion order, would differ from the one-worker build."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pools = []
+
+    def threads(max_workers, mp_context, initializer):
+        pools.append(max_workers)
+        return ThreadPoolExecutor(max_workers, initializer=initializer)
+
+    monkeypatch.setattr(generate, "ProcessPoolExecutor", threads)
+    small = dataclasses.replace(world, gestures=("grasp", "slide", "hand_merge"), subjects=1, capture_frames=5)
+    one = build_world_dataset(small, radar, short_chain, tmp_path / "one", progress=False)
+    two = build_world_dataset(dataclasses.replace(small, workers=2), radar, short_chain, tmp_path / "two", progress=False)
+    assert pools == [2]
+    with h5py.File(one) as a, h5py.File(two) as b:
+        assert len(set(a["labels"][:].tolist())) == 3  # three different rows, in gesture order
+        for key in ("spectrograms", "skeletons", "labels", "hand_mask", "window_start_s"):
+            np.testing.assert_array_equal(a[key][:], b[key][:])
+
+
 def test_command_line_writes_recordings_and_prints_the_folder(tmp_path):
     out = tmp_path / "world"
     env = dict(os.environ, PYTHONPATH=str(REPO / "src"))

@@ -55,8 +55,12 @@ def test_iq_imbalance_creates_the_image_at_the_mirrored_doppler(radar, chain, st
     assert d > half  # approaching: positive Doppler
     image_bin = b if stage == "slow_time" else radar.n_samples - b
     image = power[image_bin, 2 * half - d]
-    mu, nu = iq_coefficients(iq)
-    assert 10 * np.log10(image / power[b, d]) == pytest.approx(20 * np.log10(abs(nu / mu)), abs=0.3)
+    # image rejection of gain g and phase error phi in closed form: |1 - g e^{j phi}|^2 / |1 + g e^{j phi}|^2
+    g, phi = 10 ** (2.0 / 20), np.radians(12.0)
+    irr_db = 10 * np.log10((1 + g**2 - 2 * g * np.cos(phi)) / (1 + g**2 + 2 * g * np.cos(phi)))  # -16.2 dB
+    assert 10 * np.log10(image / power[b, d]) == pytest.approx(irr_db, abs=0.3)
+    mu, nu = iq_coefficients(iq)  # the coefficients the world applies give the same ratio
+    assert 20 * np.log10(abs(nu / mu)) == pytest.approx(irr_db, abs=1e-9)
     if stage == "adc":  # nothing at the mirrored Doppler of the target's own bin
         assert power[b, 2 * half - d] < 1e-4 * power[b, d]
 

@@ -8,11 +8,12 @@ import hydra
 from omegaconf import DictConfig
 
 from handradar.config import VERSION_BASE, config_dir
-from handradar.runs.cli import run_cli
+from handradar.runs.cli import hydra_overrides_checked, run_cli
 
 USAGE = "handradar-fetch dataset=sfinge3d|dhg [out=DIR] [fetch.url=URL] [fetch.txt_only=false]"
 
 
+@hydra_overrides_checked(USAGE)
 @hydra.main(config_path=str(config_dir()), config_name="fetch", version_base=VERSION_BASE)
 def main(cfg: DictConfig) -> None:
     from handradar.data.fetch import DATASETS, fetch

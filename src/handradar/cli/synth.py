@@ -8,11 +8,12 @@ import hydra
 from omegaconf import DictConfig
 
 from handradar.config import VERSION_BASE, config_dir
-from handradar.runs.cli import run_cli
+from handradar.runs.cli import hydra_overrides_checked, run_cli
 
 USAGE = "handradar-synth source=sfinge3d|dhg|leap source.root=DIR out=FILE.h5 [synth.weights=CKPT] [key=value ...]"
 
 
+@hydra_overrides_checked(USAGE)
 @hydra.main(config_path=str(config_dir()), config_name="synth", version_base=VERSION_BASE)
 def main(cfg: DictConfig) -> None:
     from hydra.utils import instantiate

@@ -29,6 +29,7 @@ from handradar.errors import FormatError, HandradarError
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
+from handradar.runs.cli import bool_option
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +70,7 @@ class RecordingsFolder:
         self.root = Path(root).expanduser()
         self.chain, self.cache_dir = chain, Path(cache_dir)
         self.skeleton_rate_hz, self.strict, self.allow_truncated = skeleton_rate_hz, strict, allow_truncated
-        self.iq_swap, self.doppler_flip = bool(iq_swap), bool(doppler_flip)
+        self.iq_swap, self.doppler_flip = bool_option("iq_swap", iq_swap), bool_option("doppler_flip", doppler_flip)
 
     def cache_key(self) -> str:
         listing = []
@@ -83,7 +84,8 @@ class RecordingsFolder:
 
     def path(self) -> Path:
         if not self.root.is_dir():
-            raise FormatError(self.root, "recordings folder not found (data.root)")
+            what = "is a file, not a folder" if self.root.exists() else "recordings folder not found"
+            raise FormatError(self.root, f"{what} (data.root: the folder that holds the recording folders)")
         out = self.cache_dir / f"recordings-{self.cache_key()}.h5"
         if not out.is_file():
             summary = ingest(self.root, out, self.chain, skeleton_rate_hz=self.skeleton_rate_hz, strict=self.strict,

@@ -3,7 +3,9 @@
 Datasets: ``spectrograms`` (N, 64, 32) float32 in [0, 1]; ``labels`` (N,) int64; ``skeletons``
 (N, T, 2, 21, 3) float32 radar-frame metres resampled to a common T over the spectrogram's time
 window; group ``meta`` with one (N,) array per label field. Extra datasets (not part of the
-contract, read by handradar itself): ``hand_mask`` (N, T, 2) bool, ``window_start_s`` (N,).
+contract, read by handradar itself): ``hand_mask`` (N, T, 2) bool, ``window_start_s`` (N,); group
+``quality`` (written by ingest) with one (N,) array per quality field of handradar.data.quality
+(verdict, coverage, longest_gap_s, duplicate_of, ...), so that jobs can filter or weight rows.
 File attributes: ``format``, ``config_hash``, ``code_version``, ``classes`` (JSON list),
 ``radar_cfg`` (the radar.cfg text), ``chain`` (JSON), ``skeleton_rate_hz``.
 
@@ -23,7 +25,7 @@ import h5py
 import numpy as np
 
 from handradar.atomic import atomic_path
-from handradar.errors import FormatError
+from handradar.errors import FormatError, printable
 from handradar.provenance import code_version
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
@@ -59,11 +61,14 @@ class DatasetWriter:
         self._datasets = {name: h5[name] for name in self.COLUMNS}
         self._row_shapes = {name: ds.shape[1:] for name, ds in self._datasets.items()}
         self._pending: dict[str, list[np.ndarray]] = {name: [] for name in self.COLUMNS}
+        self.quality: dict[str, list] = {}
 
     def append(self, spectrogram: np.ndarray, label: int, skeleton: np.ndarray, hand_mask: np.ndarray,
-               window_start_s: float, meta: dict[str, object]) -> None:
+               window_start_s: float, meta: dict[str, object], *, quality: dict[str, object] | None = None) -> None:
         if self.n and set(meta) != set(self.meta):
             raise ValueError(f"meta fields {sorted(meta)} differ from the first row's {sorted(self.meta)}")
+        if self.n and set(quality or {}) != set(self.quality):
+            raise ValueError(f"quality fields {sorted(quality or {})} differ from the first row's {sorted(self.quality)}")
         rows = []
         for name, value in zip(self.COLUMNS, (spectrogram, label, skeleton, hand_mask, window_start_s)):
             row = np.array(value)  # a copy: the caller may reuse its buffer before the block is written
@@ -74,6 +79,8 @@ class DatasetWriter:
             self._pending[name].append(row)
         for k, v in meta.items():
             self.meta.setdefault(k, []).append(v)
+        for k, v in (quality or {}).items():
+            self.quality.setdefault(k, []).append(v)
         self.n += 1
         if len(self._pending["labels"]) >= self.BLOCK:
             self._flush()
@@ -91,16 +98,23 @@ class DatasetWriter:
 
     def finish(self) -> None:
         self._flush()
-        g = self.h5.create_group("meta")
-        for k, values in self.meta.items():
-            if all(isinstance(v, (bool, np.bool_)) for v in values):
-                g.create_dataset(k, data=np.asarray(values, dtype=bool))
-            elif all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in values):
-                g.create_dataset(k, data=np.asarray(values, dtype=np.int64))
-            elif all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in values):
-                g.create_dataset(k, data=np.asarray(values, dtype=np.float64))
-            else:
-                g.create_dataset(k, data=np.asarray([str(v) for v in values], dtype=object), dtype=STR)
+        _write_columns(self.h5.create_group("meta"), self.meta)
+        if self.quality:
+            _write_columns(self.h5.create_group("quality"), self.quality)
+
+
+def _write_columns(g: h5py.Group, columns: dict[str, list]) -> None:
+    """One (N,) dataset per column: bool, int64, float64 or UTF-8 text, whichever holds every value."""
+    for k, values in columns.items():
+        if all(isinstance(v, (bool, np.bool_)) for v in values):
+            g.create_dataset(k, data=np.asarray(values, dtype=bool))
+        elif all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in values):
+            g.create_dataset(k, data=np.asarray(values, dtype=np.int64))
+        elif all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool) for v in values):
+            g.create_dataset(k, data=np.asarray(values, dtype=np.float64))
+        else:
+            # printable: a name that is not UTF-8 (file names may hold any bytes) must not fail the finished file
+            g.create_dataset(k, data=np.asarray([printable(str(v)) for v in values], dtype=object), dtype=STR)
 
 
 @contextlib.contextmanager
@@ -164,14 +178,22 @@ def read_attrs(path: str | Path) -> dict[str, object]:
     return attrs
 
 
-def read_meta_group(path: str | Path) -> dict[str, np.ndarray]:
-    """The ``meta`` group as numpy arrays (strings decoded)."""
+def read_meta_group(path: str | Path, group: str = "meta") -> dict[str, np.ndarray]:
+    """The ``meta`` group (or another group of (N,) columns) as numpy arrays (strings decoded)."""
     with h5py.File(path, "r") as h5:
         out = {}
-        for k, ds in h5["meta"].items():
+        for k, ds in h5[group].items():
             a = ds[()]
             out[k] = np.asarray([s.decode() if isinstance(s, bytes) else s for s in a]) if a.dtype == object else a
         return out
+
+
+def read_quality_group(path: str | Path) -> dict[str, np.ndarray]:
+    """The per-row ``quality`` fields that ingest writes (handradar.data.quality); {} where the file has none."""
+    with h5py.File(path, "r") as h5:
+        if "quality" not in h5:
+            return {}
+    return read_meta_group(path, "quality")
 
 
 def validate(path: str | Path) -> int:
@@ -204,8 +226,26 @@ def validate(path: str | Path) -> int:
             raise FormatError(path, "'meta' must be a group of (N,) arrays")
         for k, ds in h5["meta"].items():
             if not isinstance(ds, h5py.Dataset) or ds.shape != (n,):
-                raise FormatError(path, f"meta/{k} must have shape ({n},), found {ds.shape}")
+                raise FormatError(path, f"meta/{k} must have shape ({n},), found {getattr(ds, 'shape', 'a group')}")
+        if "quality" in h5:
+            _validate_quality(path, h5["quality"], n)
         for k in ("config_hash", "code_version"):
             if k not in h5.attrs:
                 raise FormatError(path, f"missing attribute {k!r}")
     return n
+
+
+QUALITY_SHARES = ("coverage", "clipped_share", "out_of_view")  # quality fields that are shares: in [0, 1] or NaN
+
+
+def _validate_quality(path: Path, group: object, n: int) -> None:
+    """The optional ``quality`` group: (N,) columns, its shares within [0, 1] (NaN: not measured)."""
+    if not isinstance(group, h5py.Group):
+        raise FormatError(path, "'quality' must be a group of (N,) arrays")
+    for k, ds in group.items():
+        if not isinstance(ds, h5py.Dataset) or ds.shape != (n,):
+            raise FormatError(path, f"quality/{k} must have shape ({n},), found {getattr(ds, 'shape', None)}")
+        if k in QUALITY_SHARES:
+            a = ds[()]
+            if a.dtype.kind != "f" or np.any((a < 0) | (a > 1)):
+                raise FormatError(path, f"quality/{k} must be shares in [0, 1] (float; NaN where not measured)")

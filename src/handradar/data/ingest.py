@@ -6,8 +6,9 @@ import contextlib
 import json
 import logging
 import math
+import os
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -19,19 +20,29 @@ from handradar.atomic import atomic_write_text
 from handradar.data.convention import ConventionCheck, check_row, range_mirror_db
 from handradar.data.examples import Example, recording_example, skeleton_steps
 from handradar.data.hdf5 import open_writer
+from handradar.data.quality import (
+    DuplicateIndex,
+    QualityReport,
+    RecordingQuality,
+    adc_fingerprint,
+    duplicate_findings,
+    gate_capture,
+    gate_window,
+    leap_fingerprint,
+)
 from handradar.data.recording import (
     FILES,
     Recording,
     check_folder,
-    find_meta_less_folders,
-    find_recordings,
     load_recording,
     read_radar,
+    scan,
 )
-from handradar.errors import FormatError, HandradarError
+from handradar.errors import FormatError, HandradarError, printable
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
+from handradar.runs.cli import bool_option
 from handradar.vocab import GESTURES
 
 log = logging.getLogger(__name__)
@@ -46,14 +57,17 @@ class IngestSummary:
     skipped: list[tuple[str, str]] = field(default_factory=list)  # (recording, reason)
     by_file: Counter = field(default_factory=Counter)  # failing file name (radar.cfg, ...) -> count
     convention: ConventionCheck = field(default_factory=ConventionCheck)  # per written row
+    quality: QualityReport = field(default_factory=QualityReport)  # per recording that reached the gate
+    check: bool = False  # checked only: ``written`` counts the rows a dataset would hold
 
     def skip(self, name: str, exc: Exception) -> None:
-        self.skipped.append((name, str(exc)))
+        self.skipped.append((name, printable(str(exc))))
         path = getattr(exc, "path", None)
         self.by_file[path.name if path is not None else type(exc).__name__] += 1
 
     def report(self) -> str:
-        lines = [f"ingested {self.written} of {self.found} recordings; skipped {len(self.skipped)}"]
+        did = "checked; would ingest" if self.check else "ingested"
+        lines = [f"{did} {self.written} of {self.found} recordings; skipped {len(self.skipped)}"]
         if self.by_file:
             lines.append("  skipped by failing file: " + ", ".join(f"{k} {n}" for k, n in self.by_file.most_common()))
         for name, reason in self.skipped[:20]:
@@ -62,6 +76,8 @@ class IngestSummary:
             lines.append(f"  ... and {len(self.skipped) - 20} more")
         if self.written:
             lines.append(self.convention.message())
+        if self.quality.rows:
+            lines.append(self.quality.table())
         return "\n".join(lines)
 
 
@@ -143,9 +159,35 @@ def convention_of(rec: Recording, ex: Example, chain: ChainConfig) -> tuple[np.n
     return r, range_mirror_db(rec.adc[f0:f0 + n, ::8, :1], rec.radar, np.median(ranges))
 
 
-def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_rate_hz: float = 100.0,
+def output_path(out: str | Path) -> Path:
+    """``out`` as the dataset's file path; FormatError for a folder: one that exists, or a name ending in
+    ``/`` (a folder by intent; no file name is invented for it)."""
+    text = os.fspath(out)
+    if text.endswith(("/", os.sep)):
+        raise FormatError(text, f"names a folder (it ends in '/'); give the dataset's file name, such as "
+                                f"{text}dataset.h5")
+    if Path(text).is_dir():
+        raise FormatError(text, "the output path is a directory; expected a file name such as data.h5")
+    return Path(text)
+
+
+def refuse_output_inside(out: Path, root: Path, folders: Iterable[Path]) -> None:
+    """FormatError when ``out`` lies inside the input: under ``root`` or a recording folder (links
+    resolved). Written there, the dataset could replace a recording's file (out=<rec>/adc_data.bin),
+    and the next ingest of ``root`` would search it."""
+    target = out.resolve()
+    for place in (root, *folders):
+        inside = place.resolve()
+        if target == inside or inside in target.parents:
+            what = "is an input file" if target.is_file() and target.name in FILES else "lies inside the input"
+            raise FormatError(out, f"{what} (under {place}); write the dataset outside the recordings folder "
+                                   f"{root}")
+
+
+def ingest(root: str | Path, out: str | Path | None, chain: ChainConfig, *, skeleton_rate_hz: float = 100.0,
            strict: bool = False, allow_truncated: bool = False, coverage_tolerance_s: float = 0.05,
-           iq_swap: bool = False, doppler_flip: bool = False, progress: bool = True) -> IngestSummary:
+           iq_swap: bool = False, doppler_flip: bool = False, progress: bool = True,
+           check: bool = False) -> IngestSummary:
     """Write every valid recording under ``root`` to ``out``; the file appears only when complete.
 
     strict: raise at the first bad recording (nothing is written; missing files and radar.cfg are
@@ -158,27 +200,49 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
     exchanged, or whose Doppler runs mirrored (handradar.data.convention says which). The sign-
     convention figures of every row go into the summary and, as JSON, beside ``out``
     (``<out stem>.checks.json``).
+
+    Every recording passes the quality gate (handradar.data.quality): one that cannot carry a
+    gesture is skipped with the measured figure, a doubtful one is kept and named; the report goes
+    into the summary (a table), into the checks JSON, and as per-row fields into the dataset's
+    ``quality`` group. check: run every check and report, but write nothing (``out`` unused).
     """
-    out = Path(out)
-    if out.is_dir():
-        raise FormatError(out, "the output path is a directory; expected a file name such as data.h5")
-    meta_less = set(find_meta_less_folders(root))
-    folders = sorted([*find_recordings(root), *meta_less])
-    summary = IngestSummary(found=len(folders))
-    if not folders:
-        raise FormatError(root, "no recordings found (no folder with a meta.json or other recording files)")
+    strict, allow_truncated, iq_swap, doppler_flip, check = (bool_option(k, v) for k, v in (
+        ("strict", strict), ("allow_truncated", allow_truncated), ("iq_swap", iq_swap),
+        ("doppler_flip", doppler_flip), ("check", check)))
+    out = None if check else output_path(out)  # check: nothing is written
+    found = scan(root)
+    meta_less = set(found.meta_less)
+    folders = sorted([*found.recordings, *meta_less])
     root = Path(root)
+    if out is not None:
+        refuse_output_inside(out, root, folders)
+    summary = IngestSummary(found=len(folders) + len(found.unreadable) + len(found.repeats), check=check)
+    if not folders:
+        unread = "".join(f"; cannot read {printable(str(f))}: {why}" for f, why in found.unreadable[:3])
+        raise FormatError(root, f"no recordings found (no folder with a meta.json or other recording files){unread}")
 
     def name_of(folder: Path) -> str:
-        """Recording name stored in the dataset: its path under ``root`` (unique, unlike the leaf name)."""
+        """Recording name stored in the dataset: its path under ``root`` (unique, unlike the leaf name),
+        bytes that are not UTF-8 written as \\xNN."""
         rel = folder.relative_to(root).as_posix()
-        return rel if rel != "." else folder.name
+        return printable(rel if rel != "." else folder.name)
 
     def skip(folder: Path, exc: HandradarError) -> None:
         if strict:
             raise exc
         summary.skip(name_of(folder), exc)
-        log.warning("skipping %s: %s", folder, exc)
+        log.warning("skipping %s: %s", printable(str(folder)), exc)
+
+    for folder, reason in found.unreadable:  # it may hold recordings: reported as one skipped entry
+        skip(folder, FormatError(folder, f"cannot read the folder ({reason}); the recordings in it, if any, are skipped"))
+    for folder, first, n in found.repeats:  # not bad data: listed, never a strict failure
+        summary.skip(name_of(folder), FormatError(folder, f"the same folder as {name_of(first)}, reached again "
+                                                          f"through a symbolic link; its {n} recording(s) are "
+                                                          f"ingested once, as {name_of(first)}"))
+    for folder in folders:
+        if printable(str(folder)) != str(folder):
+            log.warning("%s: the name is not valid UTF-8; its recording is stored as %s", printable(str(folder)),
+                        name_of(folder))
 
     # the radar configurations first: they choose the reference, and a bad radar.cfg is reported as such
     radars: dict[Path, RadarConfig] = {}
@@ -197,6 +261,7 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
         n_ref = sum(processing_fields(r) == processing_fields(radars[ref]) for r in radars.values())
         log.info("reference radar configuration: %s (%d of %d recordings)", name_of(ref), n_ref, len(radars))
 
+    duplicates = DuplicateIndex()
     with contextlib.ExitStack() as stack:
         stack.enter_context(_one_torch_thread())
         writer = None
@@ -212,12 +277,27 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
                                                             "dataset")
                 rec = load_recording(folder, coverage_tolerance_s=coverage_tolerance_s,
                                      allow_truncated=allow_truncated, iq_swap=iq_swap, doppler_flip=doppler_flip)
+                quality, rec = gate_capture(rec)  # rec: its outlier frames dropped
+                summary.quality.add(name_of(folder), quality)
+                _raise_if_skipped(folder, quality)
                 try:
                     ex = recording_example(rec, chain, skeleton_rate_hz)
                 except ValueError as exc:  # a capture shorter than one spectrogram window, a gate beyond range
+                    del summary.quality.rows[name_of(folder)]  # not the gate's verdict: reported as a format failure
                     raise FormatError(folder / "adc_data.bin", str(exc)) from None
+                ex = gate_window(rec, ex, chain, quality)  # steps inside long Leap gaps untracked
+                _raise_if_skipped(folder, quality)
+                keys = adc_fingerprint(rec.adc), leap_fingerprint(rec.skeleton)
+                duplicate_findings(duplicates.find(folder, *keys), quality)
             except HandradarError as exc:
                 skip(folder, exc)
+                continue
+            duplicates.add(name_of(folder), folder, *keys)
+            labels = rec.meta.labels()
+            labels["recording"] = name_of(folder)
+            summary.convention.add(labels["recording"], *convention_of(rec, ex, chain))
+            summary.written += 1
+            if check:
                 continue
             if writer is None:
                 radar = radars[ref]
@@ -225,17 +305,23 @@ def ingest(root: str | Path, out: str | Path, chain: ChainConfig, *, skeleton_ra
                 writer = stack.enter_context(open_writer(
                     out, classes=GESTURES, radar=radar, chain=chain, skeleton_rate_hz=skeleton_rate_hz,
                     n_steps=n_steps, config_hash=config_hash(radar, chain, skeleton_rate_hz, "ingest")))
-            labels = rec.meta.labels()
-            labels["recording"] = name_of(folder)
             writer.append(ex.spectrogram, rec.meta.label, ex.skeleton.positions, ex.skeleton.mask,
-                          ex.window_start_s, labels)
-            summary.convention.add(labels["recording"], *convention_of(rec, ex, chain))
-            summary.written += 1
+                          ex.window_start_s, labels, quality=quality.row_fields())
+        if check:
+            return summary
         if writer is None:
             raise FormatError(root, f"none of the {len(folders)} recordings could be ingested:\n{summary.report()}")
-    checks = {"convention": {**summary.convention.to_json(), "iq_swap": iq_swap, "doppler_flip": doppler_flip}}
+    checks = {"convention": {**summary.convention.to_json(), "iq_swap": iq_swap, "doppler_flip": doppler_flip},
+              "quality": summary.quality.to_json(), "skipped": dict(summary.skipped)}
     atomic_write_text(checks_path(out), json.dumps(checks, indent=1) + "\n")  # after the dataset is complete
     return summary
+
+
+def _raise_if_skipped(folder: Path, quality: RecordingQuality) -> None:
+    """The quality gate's first skip finding as the FormatError that skips the recording, naming its file."""
+    finding = quality.first_skip()
+    if finding is not None:
+        raise FormatError(folder / finding.file, f"{finding.message} (quality gate: {finding.check})")
 
 
 def checks_path(dataset: str | Path) -> Path:

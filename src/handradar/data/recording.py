@@ -8,7 +8,10 @@ only evaluation code may read it, through :func:`read_truth`.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -27,6 +30,8 @@ from handradar.radar.config import RadarConfig
 from handradar.radar.dca1000 import read_adc
 from handradar.radar.signal import doppler_mirror
 from handradar.vocab import GESTURES
+
+log = logging.getLogger(__name__)
 
 FORMAT = "handradar.recording/1"
 FILES = ("radar.cfg", "adc_data.bin", "leap.jsonl", "meta.json")
@@ -160,7 +165,8 @@ class Recording:
 def check_folder(folder: str | Path) -> Path:
     folder = Path(folder)
     if not folder.is_dir():
-        raise FormatError(folder, "not a recording folder (no such directory)")
+        what = "a file" if folder.exists() else "no such directory"
+        raise FormatError(folder, f"not a recording folder ({what})")
     missing = [f for f in FILES if not (folder / f).is_file()]
     if missing:
         raise FormatError(folder, f"missing file(s) {', '.join(missing)}; a recording holds {', '.join(FILES)}")
@@ -214,12 +220,84 @@ def load_recording(folder: str | Path, *, coverage_tolerance_s: float = 0.05,
     return Recording(folder=folder, radar=radar, adc=adc, skeleton=skeleton, meta=meta)
 
 
-def find_recordings(root: str | Path) -> list[Path]:
-    """Recording folders under ``root`` (any folder holding a meta.json), sorted."""
+@dataclass
+class Scan:
+    """What :func:`scan` found under a root: recording folders, and what it could not search."""
+
+    recordings: list[Path]  # folders holding a meta.json, sorted
+    meta_less: list[Path]  # folders holding other recording files but no meta.json, sorted
+    unreadable: list[tuple[Path, str]]  # folders that could not be listed, with the OS reason
+    repeats: list[tuple[Path, Path, int]]  # (a folder reached again through a symbolic link, where it was
+    # first found, the recordings found there): searched once, so its recordings are not counted twice
+
+
+def check_root(root: str | Path) -> Path:
+    """``root`` as a Path; FormatError when it is missing or not a folder (a file says so)."""
     root = Path(root)
-    if not root.is_dir():
-        raise FormatError(root, "no such directory")
-    return sorted(p.parent for p in root.rglob("meta.json"))
+    if root.is_dir():
+        return root
+    if root.exists():
+        raise FormatError(root, "is a file, not a directory; give the folder that holds the recording folders")
+    raise FormatError(root, "no such directory")
+
+
+def scan(root: str | Path) -> Scan:
+    """Search ``root`` for recording folders, following symbolic links (each folder searched once).
+
+    A folder reached a second time (two links to it, or a link back to a folder above: a loop) is
+    not searched again; where it holds recordings and is not a loop it is listed in ``repeats``. A
+    folder that cannot be listed (permissions, I/O error) is listed in ``unreadable`` with the
+    reason; the search goes on. Links whose target is missing are ignored (a recording file behind
+    one is reported missing by :func:`check_folder`).
+    """
+    root = check_root(root)
+    seen: dict[tuple[int, int], Path] = {}
+    found: dict[Path, set[str]] = {}
+    unreadable: list[tuple[Path, str]] = []
+    again: list[tuple[Path, Path]] = []
+    stack = [root]
+    while stack:
+        folder = stack.pop()
+        try:
+            st = folder.stat()
+            key = (st.st_dev, st.st_ino)
+            if key in seen:
+                again.append((folder, seen[key]))
+                continue
+            seen[key] = folder
+            with os.scandir(folder) as it:
+                entries = sorted(it, key=lambda e: e.name)
+        except OSError as exc:
+            if folder == root:
+                raise FormatError(root, f"cannot read the folder: {exc.strerror or exc}") from None
+            unreadable.append((folder, exc.strerror or str(exc)))
+            continue
+        subfolders, files = [], set()
+        for entry in entries:
+            with contextlib.suppress(OSError):  # a link that cannot be followed counts as neither
+                if entry.is_dir():  # follows links
+                    subfolders.append(folder / entry.name)
+                elif entry.name in FILES and entry.is_file():
+                    files.add(entry.name)
+        if files:
+            found[folder] = files
+        stack.extend(reversed(subfolders))  # depth first, in name order
+    repeats = []
+    for folder, first in again:
+        if first in folder.parents:  # a loop: the link leads back above itself
+            log.warning("%s: a symbolic link back to %s, which holds it; not searched again", folder, first)
+            continue
+        n = sum(1 for f, names in found.items() if "meta.json" in names and (f == first or first in f.parents))
+        if n:
+            repeats.append((folder, first, n))
+    return Scan(recordings=sorted(f for f, names in found.items() if "meta.json" in names),
+                meta_less=sorted(f for f, names in found.items() if "meta.json" not in names),
+                unreadable=unreadable, repeats=repeats)
+
+
+def find_recordings(root: str | Path) -> list[Path]:
+    """Recording folders under ``root`` (any folder holding a meta.json), sorted; links followed (:func:`scan`)."""
+    return scan(root).recordings
 
 
 def find_meta_less_folders(root: str | Path) -> list[Path]:
@@ -227,11 +305,7 @@ def find_meta_less_folders(root: str | Path) -> list[Path]:
 
     :func:`find_recordings` does not see them; ingest reports them as skipped.
     """
-    root = Path(root)
-    if not root.is_dir():
-        raise FormatError(root, "no such directory")
-    holders = {p.parent for name in FILES if name != "meta.json" for p in root.rglob(name) if p.is_file()}
-    return sorted(f for f in holders if not (f / "meta.json").exists())
+    return scan(root).meta_less
 
 
 def write_meta(folder: str | Path, meta: RecordingMeta, truth: dict | None = None) -> None:

@@ -24,6 +24,9 @@ from typing import Literal
 
 import numpy as np
 
+from handradar.errors import TooFewRows
+from handradar.vocab import GESTURES
+
 OOD_KINDS = ("angle", "subject", "hands", "occlusion")
 
 
@@ -128,8 +131,30 @@ def few_shot_split(labels: np.ndarray, fraction: float, *, seed: int,
             members = np.sort(pool[labels[pool] == c])
             k = min(len(members), max(1, int(round(fraction * np.count_nonzero(labels == c)))))
             train.append(_class_permutation(members, seed, c)[:k])
-        return Split(train=np.concatenate(train), pool=pool, test=test_rows)
+        return Split(train=np.concatenate(train) if train else pool[:0], pool=pool, test=test_rows)
     raise ValueError(f"test protocol must be 'remainder' or 'fixed', found {test!r}")
+
+
+def class_counts(labels: np.ndarray, classes: Sequence[str] | None = None) -> str:
+    """``N rows: grasp 2, circle 1`` (rows per class, in label order) for messages about too few rows."""
+    names = list(classes) if classes is not None else list(GESTURES)
+    values, counts = np.unique(np.asarray(labels), return_counts=True)
+    per = ", ".join(f"{names[v] if 0 <= v < len(names) else v} {n}" for v, n in zip(values.tolist(), counts.tolist()))
+    return f"{len(labels)} row{'s' * (len(labels) != 1)}" + (f": {per}" if per else "")
+
+
+def check_split(split: Split, labels: np.ndarray, spec: dict, classes: Sequence[str] | None = None) -> Split:
+    """``split``, or TooFewRows stating the minimum: training rows of at least 2 gestures (a classifier that
+    has seen one gesture tells nothing apart) and a test row."""
+    trained = len(np.unique(np.asarray(labels)[split.train]))
+    if trained >= 2 and len(split.test):
+        return split
+    what = ("at least 2 gestures with at least 2 rows each (1 to train on, 1 to test on)"
+            if spec.get("kind", "few_shot") == "few_shot" else
+            "in-distribution rows of at least 2 gestures to train on and out-of-distribution rows to test on")
+    raise TooFewRows(f"too few rows for the split {spec}: training needs {what}; the data hold "
+                     f"{class_counts(labels, classes)} (the split trains on {len(split.train)} rows of {trained} "
+                     f"gesture(s) and tests on {len(split.test)})")
 
 
 def ood_field(kind: str) -> str:
@@ -155,7 +180,7 @@ def default_train_values(kind: str, values: np.ndarray, seed: int, test_subjects
     if kind == "subject":
         subjects = np.unique(values)
         if len(subjects) < 2:
-            raise ValueError(f"subject split needs at least 2 subjects, found {list(subjects)}")
+            raise TooFewRows(f"subject split needs at least 2 subjects, found {list(subjects)}")
         n_test = min(len(subjects) - 1, max(1, int(np.ceil(test_subjects * len(subjects)))))
         held = np.random.default_rng([int(seed), 7919]).permutation(subjects)[:n_test]
         return sorted(set(subjects.tolist()) - set(held.tolist()))
@@ -176,7 +201,7 @@ def ood_split(labels: np.ndarray, values: np.ndarray, train_values: Sequence, *,
     inside = np.isin(values, list(train_values))
     in_rows, out_rows = np.flatnonzero(inside), np.flatnonzero(~inside)
     if not len(in_rows) or not len(out_rows):
-        raise ValueError(f"OOD split on values {sorted(set(values.tolist()))} with in-distribution {list(train_values)}: "
+        raise TooFewRows(f"OOD split on values {sorted(set(values.tolist()))} with in-distribution {list(train_values)}: "
                          f"{len(in_rows)} in-distribution and {len(out_rows)} out-of-distribution rows; both must be > 0")
     train = stratified_sample(labels, fraction, seed, in_rows)
     test = stratified_sample(labels, test_fraction, seed, out_rows)
@@ -188,8 +213,9 @@ def make_split(spec: dict, labels: np.ndarray, meta: dict[str, np.ndarray], seed
     """The split a preset's ``split`` config names (``kind: few_shot`` or ``kind: ood``)."""
     kind = spec.get("kind", "few_shot")
     if kind == "few_shot":
-        return few_shot_split(labels, float(spec["fraction"]), seed=seed, test=spec.get("test", "remainder"),
-                              test_fraction=float(spec.get("test_fraction", 0.2)), test_seed=int(spec.get("test_seed", 0)))
+        return check_split(few_shot_split(labels, float(spec["fraction"]), seed=seed, test=spec.get("test", "remainder"),
+                              test_fraction=float(spec.get("test_fraction", 0.2)), test_seed=int(spec.get("test_seed", 0))),
+                           labels, spec)
     if kind == "ood":
         ood = spec["ood"]
         field = ood_field(ood)
@@ -200,6 +226,7 @@ def make_split(spec: dict, labels: np.ndarray, meta: dict[str, np.ndarray], seed
         train_values = spec.get("train_values")
         if train_values is None:
             train_values = default_train_values(ood, values, seed, float(spec.get("test_subjects", 0.25)))
-        return ood_split(labels, values, list(train_values), seed=seed, fraction=float(spec.get("fraction", 1.0)),
-                         test_fraction=float(spec.get("test_fraction", 0.5)))
+        return check_split(ood_split(labels, values, list(train_values), seed=seed,
+                                     fraction=float(spec.get("fraction", 1.0)),
+                                     test_fraction=float(spec.get("test_fraction", 0.5))), labels, spec)
     raise ValueError(f"split kind must be 'few_shot' or 'ood', found {kind!r}")

@@ -7,10 +7,11 @@ is "none"); ``iq_imbalance``: a world whose only effect is outside the vocabular
 An "inconclusive" answer is wrong in every case: a withheld effect is there to be named, a control
 has none to be shown.
 The world's other settings are shared by every case: the ``world`` config group (``world=heldout``
-runs the benchmark on another world's physics) with ``benchmark.world`` (keys of
-handradar.world.WorldConfig) on top; ``benchmark.strengths`` ({effect: {param: value}}) sets the withheld effect's own
-parameters in its case (an effect must change the radar data to cause a gap at all: see the radar
-signature column). Each case's dataset is built once by ``benchmark.builder`` (cached by config hash)
+runs the benchmark on another world's physics), then the size's settings (``benchmark.sizes`` at
+``benchmark.size``: 240 or 36 recordings per case), then ``benchmark.world`` (keys of
+handradar.world.WorldConfig) on top (:func:`benchmark_world`); ``benchmark.strengths``
+({effect: {param: value}}) sets the withheld effect's own parameters in its case (an effect must
+change the radar data to cause a gap at all: see the radar signature column). Each case's dataset is built once by ``benchmark.builder`` (cached by config hash)
 and diagnosed by exactly the code diagnose.py runs on recordings; its report is kept in the run
 folder and, keyed by the case and every setting, in ``benchmark.state_dir`` so that a stopped
 benchmark resumes.
@@ -18,10 +19,11 @@ benchmark resumes.
 Scoring is the only place that knows the truth, and it takes it from the world configuration this
 module generated (the case), never from the data the diagnosis sees.
 
-Outputs: a confusion matrix (withheld effect x attributed cause) as PNG, a markdown table of the
-top-1 attribution and gap_closed per case, written to ``benchmark.figures_dir`` and
-``benchmark.results_md`` (docs/gap_benchmark.md, included by the README), and ``benchmark.json``
-in the run folder.
+Outputs, all in the run folder (never into docs/): ``figures/gap_confusion.png`` (withheld effect x
+attributed cause), ``gap_benchmark.md`` (the top-1 attribution and gap_closed per case),
+``benchmark.json`` (every figure) and ``record.json``, the compact record
+(handradar.gap.records) that ``make gap-report`` renders; ``benchmark.record_dir`` also keeps the
+record there as ``<world>_<size>.json`` (results/gap_benchmark holds the published ones).
 
 Public API:
 
@@ -32,11 +34,12 @@ Public API:
     effect_reference(measured, clean, baseline) -> dict   (truth side: the world's change added to the
                                                        simulator's baseline spectrograms)
     change_correlation(world_change, candidate_change) -> float   (Pearson r over every pixel)
+    benchmark_world(cfg) -> dict                      (the world settings every case shares)
     BenchmarkWorlds.from_config(cfg)     (a preset's worlds: .config(case), .dataset(case, window_starts_s=None),
                                           .clean(window_starts_s=None), .radar, .chain)
     truth_side(worlds, case_path, clean_path, ...) -> dict   (both, over the case's windows)
     score(results) -> dict                            (confusion matrix, top-1, mean gap_closed)
-    run_benchmark(cfg, out_dir) -> Path               (the results markdown)
+    run_benchmark(cfg, out_dir) -> Path               (the run's record.json)
 """
 
 from __future__ import annotations
@@ -59,25 +62,26 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_write_text
+from handradar.errors import HandradarError
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
 from handradar.gap.job import headline_metrics, write_outputs
+from handradar.gap.records import benchmark_record, record_name
 from handradar.gap.report import VERDICTS
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
-from handradar.provenance import code_version, config_hash
+from handradar.provenance import code_version, config_hash, machine
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
-from handradar.runs.hydra import command_line, output_dir
+from handradar.runs.hydra import command_line, group_choice, output_dir
 from handradar.runs.mlflow import Tracker, tracked_run
 from handradar.runs.tables import fmt_number
 from handradar.sim.factory import SimFactory
 from handradar.viz.gap import confusion_figure
 from handradar.vocab import EFFECTS
-from handradar.world.config import world_config
+from handradar.world.config import WORLD_VERSION, world_config
 
 log = logging.getLogger(__name__)
 
-NOTES_MARKER = "<!-- notes: text below this line is kept when the benchmark rewrites the file -->"
 CONTROL_NOTHING = "nothing"
 CONTROL_OUTSIDE = "iq_imbalance"  # the reference world's effect outside the vocabulary
 
@@ -118,10 +122,35 @@ def case_world(world: Mapping | None, case: Case, strengths: Mapping | None = No
     return w
 
 
+def benchmark_world(cfg: DictConfig) -> dict:
+    """The world settings every case shares: the ``world`` group, then ``benchmark.sizes[benchmark.size]``
+    (when the preset names a size), then ``benchmark.world``. A size that is not a key of
+    ``benchmark.sizes``, or whose settings do not give that many recordings per case, is an error."""
+    bench = cfg.benchmark
+    layers = [cfg.get("world") or {}]
+    size = bench.get("size")
+    if size is not None:
+        sizes = bench.get("sizes") or {}
+        if str(size) not in sizes:
+            raise HandradarError(f"benchmark.size={size}: not one of the sizes in benchmark.sizes "
+                                 f"({', '.join(map(str, sizes))})")
+        layers.append(sizes[str(size)])
+    layers.append(bench.get("world") or {})
+    world = OmegaConf.to_container(OmegaConf.merge(*layers), resolve=True)
+    if size is not None:
+        w = world_config(world)
+        n = len(w.gestures) * w.subjects * len(w.angles_deg) * w.repetitions
+        if n != int(size):
+            raise HandradarError(f"benchmark.size={size}: the world settings give {n} recordings per case "
+                                 "(gestures x subjects x angles x repetitions); change benchmark.sizes, "
+                                 "not the size's world")
+    return world
+
+
 @dataclass(frozen=True)
 class BenchmarkWorlds:
-    """The worlds of a benchmark preset: its radar and chain, the shared world settings (the ``world``
-    group with ``benchmark.world`` on top; world=heldout: other physics), the withheld effects'
+    """The worlds of a benchmark preset: its radar and chain, the shared world settings
+    (:func:`benchmark_world`; world=heldout: other physics), the withheld effects'
     ``benchmark.strengths`` and the builder (``benchmark.builder``) with its cache folder."""
 
     radar: RadarConfig
@@ -138,8 +167,7 @@ class BenchmarkWorlds:
         bench = cfg.benchmark
         strengths = bench.get("strengths")
         return cls(instantiate(cfg.radar), instantiate(cfg.chain), get_method(str(bench.builder)),
-                   OmegaConf.to_container(OmegaConf.merge(cfg.get("world") or {}, bench.get("world") or {}),
-                                          resolve=True),
+                   benchmark_world(cfg),
                    OmegaConf.to_container(strengths, resolve=True) if strengths is not None else {},
                    Path(cfg.paths.cache_dir) / "world")
 
@@ -347,7 +375,8 @@ def _speckle_clearly_first(sp: Mapping | None, truth: str) -> bool:
 
 DEFAULT_COMMAND = "python diagnose.py +experiment=gap_benchmark"
 # overrides that only say where outputs go or how progress shows: left out of the command a results file names
-OUTPUT_KEYS = ("benchmark.state_dir", "benchmark.results_md", "benchmark.figures_dir", "benchmark.figure", "progress")
+OUTPUT_KEYS = ("benchmark.state_dir", "benchmark.record_dir", "progress")
+FIGURE = "figures/gap_confusion.png"  # in the run folder, as the run's gap_benchmark.md links it
 
 
 def split_text(diag_cfg: Mapping, folds: int) -> str:
@@ -432,7 +461,8 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
 
 
 def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
-    """Every case: build the world's dataset, diagnose it, score; write the figure, table and JSON."""
+    """Every case: build the world's dataset, diagnose it, score; write the figure, table, JSON and the
+    compact record into ``out_dir`` (and the record into ``benchmark.record_dir`` when set)."""
     bench = cfg.benchmark
     out = Path(out_dir)
     worlds = BenchmarkWorlds.from_config(cfg)
@@ -443,9 +473,13 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     results: list[dict] = []
     t_start = time.perf_counter()
     seed = diag_cfg.get("seed", 0)
-    tags = {"preset": cfg.task_name, "seed": seed, "code_version": code_version(), "run_dir": out}
+    world_name = group_choice("world") or "custom"  # the world group's choice (outside Hydra: not known)
+    size = bench.get("size")
+    label = f"{world_name}_{size}" if size is not None else world_name
+    tags = {"preset": cfg.task_name, "world": world_name, "size": size, "seed": seed, "code_version": code_version(),
+            "run_dir": out}
     tracker = instantiate(cfg.logger) if cfg.get("logger") else Tracker("", "", enabled=False)
-    with tracked_run(tracker, run_name=f"{cfg.task_name}-seed{seed}", tags=tags,
+    with tracked_run(tracker, run_name=f"{cfg.task_name}-{label}-seed{seed}", tags=tags,
                      config=OmegaConf.to_container(cfg, resolve=True)):
         clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
         for case in cases(list(bench.cases)):
@@ -476,9 +510,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             tracker.log_metrics({f"bench/{case.name}/{k.split('/', 1)[1]}": v
                                  for k, v in headline_metrics(diagnosis.report).items()})
         scores = score(results)
-        figures_dir, md_path = Path(bench.figures_dir), Path(bench.results_md)
         fig = confusion_figure(np.asarray(scores["matrix"]), [f"{r['case']} ({r['truth']})" for r in results],
-                               scores["labels"], figures_dir / str(bench.get("figure", "gap_confusion.png")),
+                               scores["labels"], out / FIGURE,
                                title=f"Gap benchmark: {scores['effects_correct']}/{scores['effects_total']} effects, "
                                      f"{scores['controls_correct']}/{scores['controls_total']} controls")
         n_rows = results[0]["rows"] if results else 0
@@ -487,30 +520,27 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                     "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
                     "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS),
                     "specificity_decides": bool(diag_cfg.get("specificity_decides", False))}
-        rel = Path(fig).resolve()
-        try:
-            rel_s = rel.relative_to(md_path.resolve().parent).as_posix()
-        except ValueError:
-            rel_s = str(rel)
-        notes = ""
-        if md_path.is_file():  # hand-written analysis below the marker survives a regeneration
-            old = md_path.read_text()
-            if NOTES_MARKER in old:
-                notes = old[old.index(NOTES_MARKER):]
-        atomic_write_text(md_path, results_markdown(results, scores, rel_s, settings) + "\n" + (notes or NOTES_MARKER + "\n"))
+        md_path = out / "gap_benchmark.md"
+        atomic_write_text(md_path, results_markdown(results, scores, FIGURE, settings) + "\n")
         atomic_write_text(out / "benchmark.json", json.dumps({"results": results, "scores": scores,
                                                               "settings": settings}, indent=1) + "\n")
+        record = benchmark_record(results, scores, settings, world=world_name, size=size, world_version=WORLD_VERSION,
+                                  machine=machine(), command=settings["command"] or DEFAULT_COMMAND)
+        rec_path = out / "record.json"
+        for path in (rec_path, *([Path(bench.record_dir) / record_name(record)] if bench.get("record_dir") else [])):
+            atomic_write_text(path, json.dumps(record, indent=1) + "\n")
         tracker.log_metrics({"bench/effects_correct": scores["effects_correct"],
                              "bench/controls_correct": scores["controls_correct"],
                              "bench/mean_true_gap_closed": scores["mean_true_gap_closed"] or 0.0,
                              "bench/wall_s": time.perf_counter() - t_start})
         tracker.log_artifact(fig, "figures")
         tracker.log_artifact(md_path)
-    return md_path
+        tracker.log_artifact(rec_path)
+    return rec_path
 
 
 def run(cfg: DictConfig) -> Path:
-    """The benchmark job (``python diagnose.py +experiment=gap_benchmark``): the results markdown's path."""
+    """The benchmark job (``python diagnose.py +experiment=gap_benchmark``): the path of the run's record."""
     if cfg.get("threads"):
         torch.set_num_threads(int(cfg.threads))
     return run_benchmark(cfg, output_dir())

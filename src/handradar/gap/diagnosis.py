@@ -87,7 +87,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from handradar.data.splits import stratified_partition
+from handradar.data.splits import class_counts, stratified_partition
 from handradar.gap.data import GapData
 from handradar.gap.engine import Variant, VariantEngine, merge
 from handradar.gap.fit import (
@@ -112,6 +112,7 @@ from handradar.gap.where import (
     signature_correlation,
     slot_power,
 )
+from handradar.errors import TooFewRows
 from handradar.metrics import (
     bootstrap_difference,
     bootstrap_gap_closed,
@@ -382,6 +383,27 @@ def cross_folds(labels: np.ndarray, k: int, seed: int) -> list[np.ndarray]:
         raise ValueError(f"diagnose.folds = {k} exceeds the {counts.min()} rows of class {classes[counts.argmin()]!r}: "
                          f"every fold must hold every class (use at most {counts.min()} folds)")
     return stratified_partition(labels, [1.0 / k] * k, seed, every_part=True)
+
+
+def check_rows(labels: np.ndarray, folds: int | str, calibration_fraction: float, seed: int) -> None:
+    """TooFewRows, stating the minimum, when ``labels``' rows cannot be diagnosed: the paired bootstrap
+    needs 2 evaluation rows and the fits 1 calibration row. With folds = "auto" that is 2 rows of
+    each gesture (cross-fitting then scores every row); one split (folds = 1) needs more."""
+    labels = np.asarray(labels)
+    k = resolve_folds(folds, labels)
+    try:
+        parts = (stratified_partition(labels, (calibration_fraction, 1.0 - calibration_fraction), seed,
+                                      every_part=True) if k == 1 else cross_folds(labels, k, seed))
+    except ValueError as exc:  # fewer rows than parts, or a class smaller than the folds asked for
+        raise TooFewRows(f"too few rows to diagnose: {exc}; the data hold {class_counts(labels)}") from None
+    n_eval = len(parts[-1]) if k == 1 else len(labels)
+    n_cal = len(parts[0]) if k == 1 else len(labels) - max(len(p) for p in parts)
+    if n_eval >= 2 and n_cal >= 1:
+        return
+    raise TooFewRows(f"too few rows to diagnose: the diagnosis needs at least 2 rows of each gesture (with "
+                     f"diagnose.folds=auto; one calibration/evaluation split needs 1 calibration and 2 evaluation "
+                     f"rows); the data hold {class_counts(labels)}, which leave {n_cal} calibration and {n_eval} "
+                     f"evaluation rows with folds={folds}")
 
 
 def _bar(total: int, desc: str, enabled: bool):
@@ -825,6 +847,7 @@ def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConf
         raise ValueError(f"unknown candidate effect(s) {unknown}; expected some of {sorted(REGISTRY)}")
     if not 0.0 < cfg.calibration_fraction < 1.0:
         raise ValueError(f"calibration_fraction must be in (0, 1), found {cfg.calibration_fraction}")
+    check_rows(data.labels, cfg.folds, cfg.calibration_fraction, cfg.seed)  # before minutes of fitting
     folds = resolve_folds(cfg.folds, data.labels)
     if cfg.folds == AUTO:
         log.info("diagnose.folds=auto: %d rows -> %s", len(data.labels),

@@ -30,7 +30,7 @@ from handradar.atomic import atomic_write_text
 from handradar.data.convention import ConventionCheck, check_row
 from handradar.data.datasets import file_hash
 from handradar.gap.data import GapData, load_dataset
-from handradar.gap.diagnosis import Diagnosis, diagnose
+from handradar.gap.diagnosis import Diagnosis, DiagnosisConfig, check_rows, diagnose
 from handradar.gap.markdown import render
 from handradar.gap.report import fitted_simulator, write_report
 from handradar.provenance import code_version
@@ -117,6 +117,8 @@ def run(cfg: DictConfig) -> Path:
 
     path = instantiate(cfg.data.dataset).path()
     data = load_dataset(path)
+    settings = DiagnosisConfig.from_mapping(OmegaConf.to_container(cfg.diagnose, resolve=True))
+    check_rows(data.labels, settings.folds, settings.calibration_fraction, settings.seed)  # before any output
     radar, chain = data.radar, data.chain  # simulate with the data's own radar and chain
     check_convention(data)
     sim_settings = OmegaConf.to_container(cfg.sim, resolve=True)

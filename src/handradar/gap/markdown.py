@@ -150,7 +150,7 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
                       f"speckle around the simulated expectation; baseline {fmt_number(base['speckle_deviance'])}): "
                       f"leader {sp['leader']}, gap_closed {sg(sp['gap_closed'])} [{sg(sp['ci95'][0])}, "
                       f"{sg(sp['ci95'][1])}]{lead}. On the benchmark worlds it favours any candidate that adds "
-                      "power where the simulation shows none (README, \"Speckle deviance\"): read it beside 1 - SSIM, "
+                      "power where the simulation shows none (docs/gap_diagnosis.md, \"Speckle deviance\"): read it beside 1 - SSIM, "
                       "not instead of it.", ""]
     for key in ("candidates", "signatures"):
         if key in rel:

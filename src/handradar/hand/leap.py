@@ -237,7 +237,10 @@ def _gc_paused() -> Iterator[None]:
 
 
 def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_start_us: float) -> HandSequence:
-    """Read ``leap.jsonl`` into a radar-frame HandSequence; time 0 is the start of radar frame 0."""
+    """Read ``leap.jsonl`` into a radar-frame HandSequence; time 0 is the start of radar frame 0.
+
+    Hands beyond one per side are dropped (the first of each side is kept); where there were any,
+    ``attrs`` counts them: ``extra_hands`` and ``extra_hand_frames`` (the frames that held them)."""
     path = Path(path)
     m = leap_matrix(leap_to_radar.tolist() if isinstance(leap_to_radar, np.ndarray) else leap_to_radar, path)
     stamps: list[float] = []
@@ -245,6 +248,7 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
     vectors: list[object] = []  # the raw joint values of those blocks, concatenated
     converted: list[np.ndarray] = []  # (hands, 21, 3) Leap mm of the blocks converted so far, in file order
     where: list[int] = []  # 2 * frame index + slot of every tracked hand
+    extra = [0, 0]  # hands beyond one per side that _frame_vectors drops, and the frames holding them
     try:
         fh = path.open("rb")  # bytes: a decoding error is then reported with its line number
     except OSError as exc:
@@ -267,6 +271,10 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
                 except RecursionError:
                     raise FormatError(path, "JSON nested too deeply", line=lineno) from None
                 ts, per_slot = _frame_vectors(obj, path, lineno)
+                n_extra = len(obj.get("hands", ())) - (per_slot[0] is not None) - (per_slot[1] is not None)
+                if n_extra:  # counted so that the quality gate can say so (handradar.data.quality)
+                    extra[0] += n_extra
+                    extra[1] += 1
                 for slot, values in enumerate(per_slot):
                     if values is not None:
                         blocks.append((lineno, slot, values))
@@ -298,7 +306,8 @@ def read_leap_jsonl(path: str | Path, leap_to_radar: np.ndarray | list, radar_st
         raise FormatError(path, f"joint coordinates of frame {t + 1} are {np.abs(radar[t]).max():.3g} m from the "
                                 "radar after leap_to_radar; expected a hand within metres")
     times = (np.asarray(stamps) - float(radar_start_us)) * 1e-6
-    return HandSequence(radar.astype(np.float32), times, mask, source=str(path))
+    attrs = {"extra_hands": extra[0], "extra_hand_frames": extra[1]} if extra[0] else {}
+    return HandSequence(radar.astype(np.float32), times, mask, source=str(path), attrs=attrs)
 
 
 # A tracked hand from the wrist to its farthest joint: 17-21 cm for an adult's open hand (wrist to

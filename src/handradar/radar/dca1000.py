@@ -60,7 +60,10 @@ def read_adc(path: str | Path, cfg: RadarConfig, *, allow_truncated: bool = Fals
         raise FormatError(path, f"cannot read: {exc.strerror}") from None
     n_frames = _expected_frames(cfg, path, size, allow_truncated)
     count = n_frames * cfg.frame_bytes() // 2
-    raw = np.fromfile(path, dtype="<i2", count=count).reshape(-1, 4)  # I(n) I(n+1) Q(n) Q(n+1)
+    try:
+        raw = np.fromfile(path, dtype="<i2", count=count).reshape(-1, 4)  # I(n) I(n+1) Q(n) Q(n+1)
+    except OSError as exc:  # e.g. a file without read permission (its size is readable all the same)
+        raise FormatError(path, f"cannot read: {exc.strerror or exc}") from None
     out = np.empty(raw.shape, dtype=np.float32)  # re(n) im(n) re(n+1) im(n+1): complex64 pairs
     # one long strided copy per column: numpy's copy loop is fast along a long axis and slow
     # along a short one, so this beats a (..., 2, 2) transpose by about 4x (int16 -> float32 is exact)

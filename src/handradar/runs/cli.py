@@ -4,7 +4,10 @@
   ``error: <message>`` and exit status 1;
 - :class:`OSError` (an output folder that is a file or read-only, a full disk, ...): ``error: <path>:
   <OS reason>`` and exit status 1;
-- a missing mandatory config value (``???``): a usage line naming the missing keys, exit status 2;
+- a missing mandatory config value (``???``), or an option of the wrong form (:class:`~handradar.errors.
+  UsageError`, e.g. ``strict=off``): the usage line and the key, exit status 2;
+- a command-line override Hydra's lexer cannot read (a non-ASCII letter, a bracket in an unquoted
+  path): the argument and how to quote it, exit status 2 (:func:`hydra_overrides_checked`, before Hydra runs);
 - Ctrl-C (SIGINT) and SIGTERM (what ``timeout``, SLURM and container runtimes send): ``interrupted;
   nothing written to <target>`` and exit status 130 / 143 (128 + the signal number, the shell convention).
 
@@ -15,17 +18,19 @@ Ctrl-C runs (atomic writes removing their temporary file) also runs on SIGTERM.
 from __future__ import annotations
 
 import contextlib
+import functools
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import InterpolationToMissingValueError, MissingMandatoryValue
 
-from handradar.errors import HandradarError
+from handradar.errors import HandradarError, UsageError
 
 T = TypeVar("T")
 
@@ -164,9 +169,81 @@ def run_cli(job: Callable[[], T], cfg: DictConfig | None = None, *, usage: str, 
             keys = missing_keys(cfg, missing)
             fail(f"usage: {usage}\nerror: missing value for {', '.join(keys)} "
                  f"(give {' '.join(k + '=...' for k in keys)})", EXIT_USAGE)
+        if isinstance(exc, UsageError):
+            fail(f"usage: {usage}\nerror: {exc}", EXIT_USAGE)
         if isinstance(exc, (HandradarError, *errors)):
             fail(_with_note(f"error: {exc}", note()), EXIT_ERROR)
         if isinstance(exc, OSError):
             fail(_with_note(f"error: {os_error_line(exc)}", note()), EXIT_ERROR)
         raise
     raise AssertionError("unreachable: fail() exits")
+
+
+TRUE_FALSE = {"true": True, "false": False}
+
+
+def bool_option(key: str, value: object) -> bool:
+    """``value`` of the boolean option ``key``: true or false only (Hydra reads ``true``/``false`` in any
+    case as booleans). Any other value raises UsageError naming both: ``strict=off`` would otherwise be
+    the non-empty string "off", which Python takes as true."""
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and value.lower() in TRUE_FALSE:  # quoted, or from an interpolation
+        return TRUE_FALSE[value.lower()]
+    if isinstance(value, np.bool_):  # from a Python caller
+        return bool(value)
+    raise UsageError(f"{key} must be true or false, found {value!r:.60}")
+
+
+def shell_quoted(override: str) -> str:
+    """``override`` with its value quoted for Hydra, inside shell quotes: ``"root='/a b'"``."""
+    key, sep, value = override.partition("=")
+    if not sep:
+        return f"'{override}'"
+    if "'" in value:
+        return f"'{key}=\"{value}\"'"
+    return f"\"{key}='{value}'\""
+
+
+def unparsable_override(argv: Sequence[str]) -> str | None:
+    """A one-line error for the first command-line override Hydra's grammar cannot read, with how to
+    quote it; None when every override parses (or Hydra's parser cannot be loaded)."""
+    try:
+        from hydra._internal.utils import get_args_parser
+        from hydra.core.override_parser.overrides_parser import OverridesParser
+        from hydra.errors import OverrideParseException
+    except ImportError:  # another Hydra: let it report
+        return None
+    try:
+        overrides = get_args_parser().parse_known_args(list(argv))[0].overrides
+    except SystemExit:  # a malformed flag: Hydra's own parser will say so
+        return None
+    parser = OverridesParser.create()
+    for override in overrides:
+        try:
+            parser.parse_overrides([override])
+        except OverrideParseException as exc:
+            reason = str(exc).splitlines()[0]
+            lexer = "LexerNoViableAltException" in reason
+            why = ("Hydra reads an unquoted value of ASCII letters, digits and a few signs only" if lexer
+                   else f"Hydra's override grammar: {reason}")
+            return (f"cannot read the argument {override!r} ({why}); quote the value for Hydra inside the "
+                    f"shell's quotes: {shell_quoted(override)}")
+    return None
+
+
+def hydra_overrides_checked(usage: str) -> Callable[[Callable[..., T]], Callable[..., T]]:
+    """Decorate a ``@hydra.main`` entry point: before Hydra runs, an override its lexer cannot read
+    ends in the usage line, the argument and how to quote it, exit status 2 (Hydra would print its
+    lexer error, which never says to quote). Calls with arguments (a passed config) go straight through."""
+    def wrap(main: Callable[..., T]) -> Callable[..., T]:
+        @functools.wraps(main)
+        def checked(*args: Any, **kwargs: Any) -> T:
+            if not args and not kwargs:
+                line = unparsable_override(sys.argv[1:])
+                if line is not None:
+                    print(f"usage: {usage}\nerror: {line}", file=sys.stderr, flush=True)
+                    sys.exit(EXIT_USAGE)
+            return main(*args, **kwargs)
+        return checked
+    return wrap

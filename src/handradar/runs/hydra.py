@@ -91,3 +91,24 @@ def command_line(script: str, skip: Iterable[str] = ()) -> str | None:
     skip = set(skip)
     kept = [o for o in HydraConfig.get().overrides.task if o.split("=", 1)[0].lstrip("+~") not in skip]
     return " ".join(["python", script, *map(shlex.quote, kept)])
+
+
+def group_choice(group: str) -> str | None:
+    """The option the running Hydra job chose for config ``group`` (e.g. ``world`` -> ``heldout2``);
+    None outside a Hydra job or when the group is not in its defaults."""
+    from hydra.core.hydra_config import HydraConfig
+
+    if not HydraConfig.initialized():
+        return None
+    choice = HydraConfig.get().runtime.choices.get(group)
+    return None if choice is None else str(choice)
+
+
+def invocation(skip: Iterable[str] = ()) -> str | None:
+    """The running Hydra job as a command: ``python train.py <overrides>`` for a script, ``<entry point>
+    <overrides>`` for a console entry point (:func:`command_line`); None outside a Hydra job."""
+    import sys
+
+    script = Path(sys.argv[0]).name if sys.argv and sys.argv[0] else "python"
+    cmd = command_line(script, skip)
+    return cmd if cmd is None or script.endswith(".py") else cmd.removeprefix("python ")

@@ -29,6 +29,8 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from handradar.atomic import file_lock
+from handradar.provenance import machine
+from handradar.runs.hydra import invocation
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -225,8 +227,11 @@ def tracked_run(tracker: Tracker, *, run_name: str, tags: Mapping[str, Any], con
                 run_id: str | None = None, dataset: DataRef | None = None) -> Iterator[str | None]:
     """A job's MLflow run: started (or resumed when ``run_id`` is in the store) with ``handradar.``
     tags, the resolved ``config`` (params + ``config.yaml``) and its ``dataset`` as an input, ended
-    FINISHED, or KILLED / FAILED when the job raises. Yields the run id (None for a disabled tracker)."""
-    prefixed = {f"{TAG_PREFIX}{k}": str(v) for k, v in tags.items()}
+    FINISHED, or KILLED / FAILED when the job raises. Yields the run id (None for a disabled tracker).
+    Every run also gets ``command`` (the Hydra job's command line, when there is one) and ``machine`` tags
+    unless ``tags`` gives them: what ``make tables`` prints beside each result."""
+    where = {"machine": machine(), **({"command": cmd} if (cmd := invocation()) else {})}
+    prefixed = {f"{TAG_PREFIX}{k}": str(v) for k, v in {**where, **tags}.items()}
     rid = tracker.start(run_id=run_id, run_name=run_name, tags=prefixed)
     if tracker.enabled:
         tracker.set_tags(prefixed)  # a resumed run keeps its first tags otherwise

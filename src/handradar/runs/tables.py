@@ -11,7 +11,9 @@
 - Table IV (out of distribution): one row per OOD split, the variant columns.
 
 Cells are ``mean ± std`` of the accuracy over the records of a row (seeds), with the count.
-A record is ``{"params": flat config (dotted keys -> str), "metrics": {name: float}}``.
+A record is ``{"params": flat config (dotted keys -> str), "metrics": {name: float}}``, optionally with
+``"provenance"`` (:func:`provenance`: command, commit, seed, machine): each row then lists the runs
+behind it (:meth:`Table.provenance_markdown`; ``make tables`` writes both to docs/results.md).
 """
 
 from __future__ import annotations
@@ -20,8 +22,11 @@ import csv
 import io
 import math
 import re
+import shlex
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+
+from handradar.provenance import commit_of
 
 VARIANT_COLUMNS = (
     ("radar_only", "Radar only"),
@@ -53,10 +58,27 @@ class Table:
     columns: list[str]
     rows: dict[str, dict[str, list[float]]] = field(default_factory=dict)  # row -> column -> values
     order: dict[str, tuple] = field(default_factory=dict)  # row -> sort key
+    sources: dict[str, list[dict]] = field(default_factory=dict)  # row -> provenance of the runs behind it
 
-    def add(self, row: str, column: str, value: float, sort_key: tuple = ()) -> None:
+    def add(self, row: str, column: str, value: float, sort_key: tuple = (), source: Mapping | None = None) -> None:
         self.rows.setdefault(row, {}).setdefault(column, []).append(float(value))
         self.order.setdefault(row, sort_key)
+        if source is not None and dict(source) not in self.sources.setdefault(row, []):
+            self.sources[row].append(dict(source))
+
+    def provenance_markdown(self) -> str:
+        """One line per row: the command that reproduces it (its seeds as one multirun), commit and machine."""
+        lines = []
+        for r in self.sorted_rows():
+            runs = group_runs(self.sources.get(r, []))
+            text = "; ".join(f"`{g['command']}` at `{g['commit']}`, seed{'s' if len(g['seeds']) > 1 else ''} "
+                             f"{', '.join(g['seeds'])}, {g['machine']}" + (" (command reconstructed from the run's tags)"
+                                                                           if g["reconstructed"] else "")
+                             for g in runs)
+            lines.append((r, text or "no provenance recorded"))
+        if len(lines) > 1 and len({text for _, text in lines}) == 1:  # one job behind every row: say it once
+            return f"- every row: {lines[0][1]}"
+        return "\n".join(f"- {r}: {text}" for r, text in lines)
 
     def sorted_rows(self) -> list[str]:
         return sorted(self.rows, key=lambda r: (self.order[r], r))
@@ -89,6 +111,55 @@ def stats(values: Sequence[float]) -> tuple[float, float, int]:
     m = sum(values) / n
     s = math.sqrt(sum((v - m) ** 2 for v in values) / (n - 1)) if n > 1 else math.nan
     return m, s, n
+
+
+def provenance(tags: Mapping[str, str], params: Mapping[str, str], overrides: Sequence[str] | None = None,
+               script: str = "train.py") -> dict:
+    """Where a run's figures come from: ``command`` (its ``handradar.command`` tag, else ``python SCRIPT``
+    with the job's Hydra ``overrides``, else rebuilt from its preset and seed: ``reconstructed``), ``commit``,
+    ``seed`` and ``machine`` ("not recorded" for runs logged before the tag existed)."""
+    seed = str(tags.get("handradar.seed", params.get("seed", "?")))
+    command, rebuilt = tags.get("handradar.command"), False
+    if not command and overrides is not None:
+        command = " ".join(["python", script, *map(shlex.quote, overrides)])
+    if not command:
+        command, rebuilt = f"python {script} +experiment={tags.get('handradar.preset', '?')} seed={seed}", True
+    return {"command": command, "commit": commit_of(tags.get("handradar.code_version", "")), "seed": seed,
+            "machine": tags.get("handradar.machine", "machine not recorded"), "reconstructed": rebuilt}
+
+
+def group_runs(sources: Sequence[Mapping]) -> list[dict]:
+    """Runs that differ only in their seed, as one multirun command (``-m ... seed=1,2,3``)."""
+    groups: dict[tuple, dict] = {}
+    for src in sources:
+        words = shlex.split(src["command"])
+        base = [w for w in words if not w.startswith("seed=")]
+        key = (tuple(base), src["commit"], src["machine"], src.get("reconstructed", False))
+        g = groups.setdefault(key, {"base": base, "commit": src["commit"], "machine": src["machine"], "seeds": [],
+                                    "reconstructed": src.get("reconstructed", False)})
+        if src["seed"] not in g["seeds"]:
+            g["seeds"].append(src["seed"])
+    out = []
+    for g in groups.values():
+        g["seeds"].sort(key=lambda x: (len(x), x))
+        base = g.pop("base")
+        if len(g["seeds"]) > 1 and len(base) >= 2 and base[0] == "python" and "-m" not in base:
+            base = [*base[:2], "-m", *base[2:]]
+        g["command"] = " ".join(map(shlex.quote, [*base, f"seed={','.join(g['seeds'])}"]))
+        out.append(g)
+    return out
+
+
+def results_markdown(tables: Sequence[Table], source: str) -> str:
+    """docs/results.md: every table, and under it each row's runs (command, commit, seeds, machine)."""
+    sections = [f"# handradar results\n\nGenerated by `make tables` from the finished MLflow runs in {source}; "
+                "do not edit. Each cell is the mean ± standard deviation over seeds (n: how many). Under each table, "
+                "the runs behind each row: the command that reproduces them, the commit, the seeds and the machine."]
+    for t in tables:
+        sections.append(t.markdown() + "\n\nRuns:\n\n" + t.provenance_markdown())
+    if not tables:
+        sections.append("(no finished train.py jobs found)")
+    return "\n\n".join(sections) + "\n"
 
 
 def fmt_number(x: float | None, digits: int = 3, signed: bool = False) -> str:
@@ -142,7 +213,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
                 for key, label in SYNTH_COLUMNS:
                     value = metrics.get(f"test/{key}{suffix}")
                     if value is not None:
-                        synth.add(row, label, value, (i,))
+                        synth.add(row, label, value, (i,), rec.get("provenance"))
             continue
         if p.get("job") not in ("variants", "external_pretrain"):
             continue  # not a train.py job
@@ -153,7 +224,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
                 if m:
                     init, classes, pct = m.groups()
                     pre.add(f"{classes} classes, {pct} % ({source})", "pre-trained" if init == "pretrained" else "from scratch",
-                            value, (-int(classes), int(pct)))
+                            value, (-int(classes), int(pct)), rec.get("provenance"))
             continue
         if kind == "ood":
             ood_kind = p.get("split.ood", "?")
@@ -169,7 +240,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
         for variant, label in VARIANT_COLUMNS:
             value = metrics.get(f"test/acc_{variant}")
             if value is not None:
-                table.add(row, label, value, key)
+                table.add(row, label, value, key, rec.get("provenance"))
     return [t for t in (synth, few, pre, ood) if t.rows]
 
 

@@ -37,7 +37,6 @@ import hashlib
 import json
 import logging
 import shutil
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -59,12 +58,14 @@ from handradar.data.datasets import (
 )
 from handradar.data.hdf5 import read_attrs
 from handradar.data.splits import Split, few_shot_split, make_split
+from handradar.errors import TooFewRows
 from handradar.gap.data import load_dataset
 from handradar.gap.job import fit_simulator
 from handradar.gap.report import GENERIC_SETTINGS, write_report
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import code_version, config_hash
 from handradar.runs.mlflow import DataRef, Tracker, flatten, tracked_run
+from handradar.runs.progress import Stages
 from handradar.runs.tables import job_table
 from handradar.sim.effects import REGISTRY
 from handradar.synthesis.providers import load_synthetic
@@ -72,6 +73,7 @@ from handradar.tasks.classify import ClassifierModule, evaluate, recompute_bn_st
 from handradar.tasks.gan import CGANModule, sample_per_class
 from handradar.training import TrackerLogger, make_trainer, resumable_fit
 from handradar.viz.confusion import plot_confusion
+from handradar.viz.summary import plot_summary
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +89,17 @@ VARIANTS: dict[str, tuple[str | None, str | None]] = {
     "radar_pool": ("pool", None),          # the upper reference of the *_only variants: the pool's real rows
 }
 HASH_IGNORED = ("paths", "logger", "resume", "state_dir", "threads", "checkpoint_interval_s", "print_table")
+# what a variant adds -> the stage that makes it (announced before the variants that train on it)
+ADDITION_STAGES = {"model": "synthesis (model-based)", "enhanced": "synthesis (RadarWeightNet)", "cgan": "CGAN samples"}
+
+
+def variant_names(variants: Any) -> list[str]:
+    """The ``variants`` setting as a list of known variant names (``all``: every one of ``VARIANTS``)."""
+    names = list(VARIANTS) if variants == "all" else list(variants)
+    unknown = [n for n in names if n not in VARIANTS]
+    if unknown:
+        raise ValueError(f"unknown variant {unknown[0]!r}; choose from {list(VARIANTS)} or variants=all")
+    return names
 
 
 def job_hash(cfg: DictConfig, data_hash: str) -> str:
@@ -158,6 +171,8 @@ class Job:
         self.tracker: Tracker = Tracker("", "", enabled=False)
         self.real: ArrayDataset
         self.state: Path
+        self.stages = Stages([])
+        self._extra: dict[str, list[FileRows | ArrayRows]] = {}  # what a variant adds, made once per job
 
     # ---- job life cycle ---------------------------------------------------------------------
     def run(self) -> dict[str, float]:
@@ -166,8 +181,10 @@ class Job:
             torch.set_num_threads(int(cfg.threads))
         # Lightning's per-fit banners (devices, tips) would bury the job's own log.
         logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)
-        real_path = instantiate(cfg.data.dataset).path()
-        self.real = load_arrays(real_path)
+        self.stages = Stages(self.stage_names())
+        with self.stages("data"):
+            real_path = instantiate(cfg.data.dataset).path()
+            self.real = load_arrays(real_path)
         data_hash = file_hash(real_path)
         jhash = job_hash(cfg, data_hash)
         self.state = Path(cfg.state_dir) / jhash
@@ -204,6 +221,14 @@ class Job:
                     self._write_outputs(results, metrics)
         return metrics
 
+    def stage_names(self) -> list[str]:
+        """The job's stages in order: the data, then (variants) what the variants add and each variant."""
+        if self.cfg.job != "variants":
+            return ["data", str(self.cfg.job)]
+        names = variant_names(self.cfg.variants)
+        adds = dict.fromkeys(VARIANTS[n][1] for n in names if VARIANTS[n][1] is not None)
+        return ["data", *(ADDITION_STAGES[a] for a in adds), *names, "summary"]
+
     def _state_lock(self) -> contextlib.AbstractContextManager[None]:
         """One live job per state folder (two identical jobs would share checkpoints); DDP ranks > 0
         run inside rank 0's job."""
@@ -222,6 +247,26 @@ class Job:
                                  if k.startswith("n_")})
         self.tracker.log_metrics(metrics)
         atomic_write_text(self.run_dir / "metrics.json", json.dumps(metrics, indent=1, sort_keys=True))
+        if self.cfg.job == "variants" and results:
+            with self.stages("summary"):
+                self.tracker.log_artifact(self.plot_summary(results), "figures")
+
+    def plot_summary(self, results: dict[str, dict]) -> Path:
+        """``figures/summary.png``: accuracy by variant, and real vs synthetic spectrograms of the same
+        pool recordings (three gestures) where the job synthesised any."""
+        real, pairs = self.real, []
+        synthetic = next((parts for parts in self._extra.values() if parts and isinstance(parts[0], FileRows)), None)
+        if synthetic is not None:
+            pool = np.load(self.state / "split.npz")["pool"]
+            fake = load_arrays(synthetic[0].path)
+            first = {}  # gesture -> index of its first pool row
+            for i, c in enumerate(real.y[pool]):
+                first.setdefault(int(c), i)
+            for c in sorted(first)[:: max(1, len(first) // 3)][:3]:
+                pairs.append((real.classes[c], real.x[pool[first[c]]], fake.x[first[c]]))
+        return plot_summary({k: r["acc"] for k, r in results.items()}, self.run_dir / "figures" / "summary.png",
+                            chance=1.0 / len(real.classes), pairs=pairs,
+                            title=f"{self.cfg.task_name}, seed {self.seed}")
 
     # ---- building blocks --------------------------------------------------------------------
     def cached(self, name: str, compute: Callable[[], dict]) -> dict:
@@ -230,10 +275,7 @@ class Job:
         if f.is_file():
             log.info("variant %s already finished (%s)", name, f)
             return json.loads(f.read_text())
-        log.info("%s: started", name)
-        t0 = time.perf_counter()
         result = compute()
-        log.info("%s: finished in %.0f s", name, time.perf_counter() - t0)
         if self.rank_zero:
             atomic_write_text(f, json.dumps(result))
             shutil.rmtree(self.state / name / "checkpoints", ignore_errors=True)  # resuming is over
@@ -295,10 +337,13 @@ class Job:
     def run_variants(self) -> dict[str, dict]:
         split = self.split()
         real, n_classes = self.real, len(self.real.classes)
+        names = variant_names(self.cfg.variants)
+        pending = [n for n in names if not (self.state / n / "result.json").is_file()]
+        for adds in dict.fromkeys(VARIANTS[n][1] for n in pending if VARIANTS[n][1] is not None):
+            with self.stages(ADDITION_STAGES[adds]):  # made before training, so each stage is timed on its own
+                self.extra_data(adds, split)
         results = {}
-        for name in self.cfg.variants:
-            if name not in VARIANTS:
-                raise ValueError(f"unknown variant {name!r}; choose from {list(VARIANTS)}")
+        for name in names:
 
             def compute(name: str = name) -> dict:
                 rows, adds = VARIANTS[name]
@@ -308,15 +353,22 @@ class Job:
                 return {**self.train_and_test(name, parts, split.test, n_classes, real.classes),
                         "n_real": int(len(real_rows)), "n_extra": sum(_rows(p) for p in extra)}
 
-            results[name] = self.cached(name, compute)
+            with self.stages(name):
+                results[name] = self.cached(name, compute)
         return results
 
     def extra_data(self, adds: str | None, split: Split) -> list[FileRows | ArrayRows]:
         """What a variant adds to its real rows (``VARIANTS``): synthetic rows of the pool's skeletons
-        (the provider fits what it needs on the real training rows only), CGAN samples, or nothing."""
-        real = self.real
+        (the provider fits what it needs on the real training rows only), CGAN samples, or nothing.
+        Made once per job."""
         if adds is None:
             return []
+        if adds not in self._extra:
+            self._extra[adds] = self._make_extra(adds, split)
+        return self._extra[adds]
+
+    def _make_extra(self, adds: str, split: Split) -> list[FileRows | ArrayRows]:
+        real = self.real
         if adds in ("model", "enhanced"):
             provider = instantiate(self.cfg.synth.provider)
             sims = self.synthesis_sims(split)
@@ -347,8 +399,13 @@ class Job:
         data = load_dataset(self.real.path).take(split.train)
         fit = self.cfg.synth.get("fit")
         fit_cfg = {"seed": self.seed, **(OmegaConf.to_container(fit, resolve=True) if fit else {})}
-        diag, settings = fit_simulator(data, OmegaConf.to_container(self.cfg.sim, resolve=True), fit_cfg,
-                                       cache_dir=Path(self.cfg.synth.cache_dir) / "fit", effects=mode == "effects")
+        try:
+            diag, settings = fit_simulator(data, OmegaConf.to_container(self.cfg.sim, resolve=True), fit_cfg,
+                                           cache_dir=Path(self.cfg.synth.cache_dir) / "fit", effects=mode == "effects")
+        except TooFewRows as exc:  # raised before any fit: say which rows and how to get out of it
+            raise TooFewRows(f"synth.fit_sim={mode} fits the simulator on the split's {len(split.train)} training "
+                             f"rows (settings synth.fit.*): {exc}; use more rows per gesture, a larger "
+                             "split.fraction, or synth.fit_sim=none") from None
         if self.rank_zero:
             write_report(self.state / "fit_report.json", diag.report, n_doppler=data.chain.stft_len,
                          n_columns=data.chain.n_columns)
@@ -463,7 +520,8 @@ class Job:
                         return self.train_and_test(name, [FileRows(real.path, train, ytr)], test, len(ids), names, test_y=yte,
                                                    init=backbone if init == "pretrained" else None)
 
-                    results[name] = self.cached(name, compute)
+                    with self.stages(name):
+                        results[name] = self.cached(name, compute)
         return results
 
 
@@ -485,4 +543,7 @@ def run(cfg: DictConfig, run_dir: str | Path | None = None) -> Path:
     if _is_rank_zero() and cfg.get("print_table", True):
         params = {k: str(v) for k, v in flatten(OmegaConf.to_container(cfg, resolve=True)).items()}
         print(job_table(params, metrics), flush=True)
+        summary = run_dir / "figures" / "summary.png"
+        if summary.is_file():
+            print(f"summary figure: {summary}", flush=True)
     return run_dir

@@ -11,7 +11,7 @@ Differentiable in both parameters.
 
 (Earlier versions held the forearm rigidly along the hand's axis, so it swung with every wrist
 flexion and its points moved like the palm; the gap benchmark could not tell it from other
-reflectors near the hand, see docs/gap_benchmark.md.)
+reflectors near the hand, see docs/gap_report.md.)
 """
 
 from __future__ import annotations

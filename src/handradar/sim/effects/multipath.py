@@ -28,7 +28,7 @@ bounce. Differentiable in every parameter.
 (Earlier versions put radar -> bone -> table -> radar image paths in, which the design's
 vocabulary does not name and which are absent for a radar lying on the table; raised by 5-15 cm
 they made a Doppler-compressed copy of the hand that closed part of any simulator-vs-measurement
-gap, docs/gap_benchmark.md.)
+gap, docs/gap_report.md.)
 """
 
 from __future__ import annotations

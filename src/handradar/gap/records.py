@@ -1,0 +1,153 @@
+"""Compact records of gap-benchmark runs and the one summary table rendered from them (``make gap-report``).
+
+A record (``handradar.gap_benchmark/1``, one JSON file per run, results/gap_benchmark/<world>_<size>.json)
+keeps what a published figure needs and where it came from: the world (config group choice) and its
+generator version, the size (recordings per case), the command, commit, seeds and machine, the scores
+and each case's verdict with the true effect's gap_closed. ``variants`` (optional) lists settings tried
+on the same world and size and judged, each with its command, commit and headline figures.
+
+Public API:
+
+    benchmark_record(results, scores, settings, *, world, size, world_version, machine, command) -> dict
+    record_name(record) -> str                 (``<world>_<size>.json``)
+    validate_record(record, where) -> dict     (FormatError naming ``where`` and the missing key)
+    load_records(folder) -> list[dict]         (every *.json, validated, in table order)
+    summary_markdown(records, source) -> str   (the summary table, its legend once, the provenance)
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from handradar.errors import FormatError
+from handradar.provenance import commit_of
+from handradar.runs.tables import fmt_number
+
+FORMAT = "handradar.gap_benchmark/1"
+WORLD_ORDER = ("default", "heldout", "heldout2", "heldout3")  # the tuning world first, then the test side
+SCORE_KEYS = ("effects_correct", "effects_total", "controls_correct", "controls_total", "effects_inconclusive",
+              "controls_inconclusive", "mean_true_gap_closed", "mean_after_gap_closed")
+CASE_KEYS = ("case", "truth", "cause", "correct", "decided_by", "recordings_needed", "true_gap_closed", "true_ci95",
+             "true_rank", "top_candidate", "top_gap_closed")
+REQUIRED = ("format", "world", "size", "world_version", "command", "commit", "seeds", "machine", "scores", "cases")
+
+
+def benchmark_record(results: Sequence[Mapping], scores: Mapping, settings: Mapping, *, world: str, size: int | None,
+                     world_version: str, machine: str, command: str) -> dict:
+    """The compact record of one benchmark run (``results`` / ``scores`` / ``settings`` as
+    handradar.gap.benchmark writes them to benchmark.json)."""
+    return {"format": FORMAT, "world": world, "size": int(size) if size is not None else int(settings.get("rows") or 0),
+            "world_version": world_version, "command": command, "commit": commit_of(str(settings.get("code_version", ""))),
+            "seeds": [int(settings.get("seed", 0))], "machine": machine, "threads": settings.get("threads"),
+            "wall_min": round(float(settings.get("minutes", 0.0)), 1), "rows": settings.get("rows"),
+            "split": settings.get("split"), "specificity_decides": bool(settings.get("specificity_decides", False)),
+            "scores": {k: scores.get(k) for k in SCORE_KEYS},
+            "cases": [{k: r.get(k) for k in CASE_KEYS} for r in results]}
+
+
+def record_name(record: Mapping) -> str:
+    return f"{record['world']}_{record['size']}.json"
+
+
+def validate_record(record: Any, where: str) -> dict:
+    """``record`` if it is a complete record, else FormatError naming ``where`` and what is wrong."""
+    if not isinstance(record, dict):
+        raise FormatError(where, "not a JSON object")
+    if record.get("format") != FORMAT:
+        raise FormatError(where, f"format {record.get('format')!r}, expected {FORMAT!r}")
+    missing = [k for k in REQUIRED if k not in record]
+    if missing:
+        raise FormatError(where, f"missing {', '.join(missing)}")
+    for i, case in enumerate(record["cases"]):
+        lacking = [k for k in ("case", "truth", "cause", "correct") if k not in case]
+        if lacking:
+            raise FormatError(where, f"case {i} lacks {', '.join(lacking)}")
+    return record
+
+
+def _order(record: Mapping) -> tuple:
+    w = record["world"]
+    return (-int(record["size"]), WORLD_ORDER.index(w) if w in WORLD_ORDER else len(WORLD_ORDER), w)
+
+
+def load_records(folder: str | Path) -> list[dict]:
+    """Every ``*.json`` record in ``folder``, validated, ordered by size (largest first), then world."""
+    out = []
+    for path in sorted(Path(folder).glob("*.json")):
+        try:
+            obj = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise FormatError(path, f"not JSON ({exc.msg})", line=exc.lineno) from None
+        out.append(validate_record(obj, str(path)))
+    return sorted(out, key=_order)
+
+
+def _cause(case: Mapping) -> str:
+    cause = str(case["cause"])
+    if cause == "inconclusive" and case.get("recordings_needed") is not None:
+        cause += f" ~{case['recordings_needed']}"
+    return cause + (" (spec.)" if case.get("decided_by") == "specificity" else "")
+
+
+def case_cell(case: Mapping) -> str:
+    """``✓`` or ``✗ <what was named>``, with the true effect's gap_closed where it has one."""
+    mark = "✓" if case["correct"] else f"✗ {_cause(case)}"
+    g = case.get("true_gap_closed")
+    return mark if g is None else f"{mark} ({fmt_number(g, signed=True)})"
+
+
+LEGEND = ("Each column is one benchmark run: for every case, a reference world with one effect on (the other "
+          "vocabulary effects off) diagnosed by the paper's simulator without it; `nothing` and `iq_imbalance` are "
+          "controls whose right answer is `none`. A cell is ✓ when the diagnosis names the withheld effect (a control: "
+          "`none`), else ✗ and what it named (`inconclusive ~N`: no verdict, about N recordings estimated to decide "
+          "it; `(spec.)`: named by `diagnose.specificity_decides`); in brackets the gap_closed of the true effect's "
+          "candidate. `default` is the world the settings were chosen on; `heldout*` judge them. Sizes: recordings "
+          "per case (240: one calibration/evaluation split; 36: cross-fitted in 3 folds).")
+
+
+def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benchmark") -> str:
+    """The one summary table of ``records`` (cases x runs), its legend once, then each run's provenance
+    and the settings tried on it (``variants``)."""
+    if not records:
+        return f"# Gap benchmark\n\n(no records in {source})\n"
+    heads = [f"{r['world']} {r['size']}" for r in records]
+    cases: list[tuple[str, str]] = []
+    for r in records:
+        for c in r["cases"]:
+            if (c["case"], c["truth"]) not in cases:
+                cases.append((c["case"], c["truth"]))
+    lines = ["# Gap benchmark", "", f"Generated by `make gap-report` from {source}/*.json; do not edit.", "", LEGEND, "",
+             "| case (truth) | " + " | ".join(heads) + " |", "|---|" + "---|" * len(records)]
+    for name, truth in cases:
+        cells = []
+        for r in records:
+            c = next((c for c in r["cases"] if c["case"] == name), None)
+            cells.append("-" if c is None else case_cell(c))
+        lines.append(f"| {name} ({truth}) | " + " | ".join(cells) + " |")
+    s = [r["scores"] for r in records]
+    lines.append("| **effects named** | " + " | ".join(f"**{x['effects_correct']} of {x['effects_total']}**" for x in s) + " |")
+    lines.append("| **controls none** | " + " | ".join(f"**{x['controls_correct']} of {x['controls_total']}**" for x in s) + " |")
+    lines.append("| mean gap_closed, true effect | " + " | ".join(fmt_number(x.get("mean_true_gap_closed"), signed=True)
+                                                          for x in s) + " |")
+    lines.append("| world version | " + " | ".join(r["world_version"] for r in records) + " |")
+    lines.append("| commit | " + " | ".join(f"`{r['commit']}`" for r in records) + " |")
+    lines += ["", "## Provenance", ""]
+    for h, r in zip(heads, records):
+        seeds = ", ".join(map(str, r["seeds"]))
+        wall = "" if r.get("wall_min") is None else f", {r['wall_min']} min on {r.get('threads') or '?'} thread(s)"
+        lines.append(f"- **{h}**: `{r['command']}` at `{r['commit']}` ({r['world_version']}), seed {seeds}, "
+                     f"{r['machine']}{wall}." + (f" {r['note']}" if r.get("note") else ""))
+    variants = [(h, v) for h, r in zip(heads, records) for v in r.get("variants") or []]
+    if variants:
+        lines += ["", "## Settings tried on these runs", "",
+                  "| run | setting | effects named | controls none | inconclusive (effects, controls) | command | commit |",
+                  "|---|---|---|---|---|---|---|"]
+        for h, v in variants:
+            x = v["scores"]
+            lines.append(f"| {h} | {v.get('what') or v['name']} | {x['effects_correct']} of {x['effects_total']} | "
+                         f"{x['controls_correct']} of {x['controls_total']} | {x['effects_inconclusive']}, "
+                         f"{x['controls_inconclusive']} | `{v['command']}` | `{v['commit']}` ({v['world_version']}) |")
+    return "\n".join(lines) + "\n"

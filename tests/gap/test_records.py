@@ -1,0 +1,93 @@
+"""Compact benchmark records and the summary table ``make gap-report`` renders from them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from experiments.gap_report import main as gap_report
+from handradar.errors import FormatError
+from handradar.gap.records import (
+    benchmark_record,
+    load_records,
+    record_name,
+    summary_markdown,
+    validate_record,
+)
+from handradar.provenance import commit_of
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _record(world: str, size: int, palm_cause: str = "palm", **extra) -> dict:
+    results = [{"case": "palm", "truth": "palm", "cause": palm_cause, "correct": palm_cause == "palm",
+                "true_gap_closed": 0.125, "true_ci95": [0.1, 0.15], "true_rank": 1, "top_candidate": "palm",
+                "top_gap_closed": 0.125, "recordings_needed": 620 if palm_cause == "inconclusive" else None, "rows": size},
+               {"case": "nothing", "truth": "none", "cause": "none", "correct": True, "true_gap_closed": None, "rows": size}]
+    scores = {"effects_correct": int(palm_cause == "palm"), "effects_total": 1, "controls_correct": 1, "controls_total": 1,
+              "effects_inconclusive": int(palm_cause == "inconclusive"), "controls_inconclusive": 0,
+              "mean_true_gap_closed": 0.125, "mean_after_gap_closed": 0.1}
+    settings = {"code_version": "0.1.0+gabc123def456.dirty", "seed": 3, "minutes": 12.34, "threads": 2, "rows": size}
+    rec = benchmark_record(results, scores, settings, world=world, size=size, world_version="world/3",
+                           machine="x86_64, 2 CPUs, no GPU", command=f"python diagnose.py world={world}")
+    return {**rec, **extra}
+
+
+def test_record_keeps_provenance_and_each_verdict():
+    r = _record("heldout", 36, "inconclusive")
+    assert validate_record(r, "x") is r and record_name(r) == "heldout_36.json"
+    assert (r["commit"], r["seeds"], r["wall_min"], r["world_version"]) == ("abc123d.dirty", [3], 12.3, "world/3")
+    assert r["cases"][0]["cause"] == "inconclusive" and r["cases"][0]["recordings_needed"] == 620
+    assert "rows" not in r["cases"][0]  # only what the table needs
+    assert commit_of("0.1.0") == "0.1.0" and commit_of("0.1.0+gf6f3eb43bb4e") == "f6f3eb4"
+
+
+def test_summary_table_one_column_per_run_legend_once():
+    records = [_record("heldout", 36, "inconclusive"), _record("default", 240),
+               _record("heldout", 240, "none", variants=[{"name": "one_split", "what": "one split", "command": "cmd v",
+                                                           "commit": "1234567", "world_version": "world/2",
+                                                           "scores": {"effects_correct": 0, "effects_total": 1,
+                                                                      "controls_correct": 1, "controls_total": 1,
+                                                                      "effects_inconclusive": 1,
+                                                                      "controls_inconclusive": 0}}])]
+    md = summary_markdown(sorted(records, key=lambda r: (-r["size"], r["world"] != "default")))
+    lines = md.splitlines()
+    assert "| case (truth) | default 240 | heldout 240 | heldout 36 |" in lines
+    assert "| palm (palm) | ✓ (+0.125) | ✗ none (+0.125) | ✗ inconclusive ~620 (+0.125) |" in lines
+    assert "| nothing (none) | ✓ | ✓ | ✓ |" in lines
+    assert "| **effects named** | **1 of 1** | **0 of 1** | **0 of 1** |" in lines
+    assert md.count("A cell is ✓") == 1  # the legend, written once
+    assert "`python diagnose.py world=heldout` at `abc123d.dirty` (world/3), seed 3, x86_64, 2 CPUs, no GPU" in md
+    assert "| heldout 240 | one split | 0 of 1 | 1 of 1 | 1, 0 | `cmd v` | `1234567` (world/2) |" in lines
+    assert "(no records in somewhere)" in summary_markdown([], "somewhere")
+
+
+def test_load_records_orders_runs_and_names_a_bad_file(tmp_path: Path):
+    for r in (_record("heldout3", 36), _record("heldout", 240), _record("default", 36), _record("default", 240)):
+        (tmp_path / record_name(r)).write_text(json.dumps(r))
+    assert [record_name(r) for r in load_records(tmp_path)] == ["default_240.json", "heldout_240.json",
+                                                                "default_36.json", "heldout3_36.json"]
+    broken = _record("heldout2", 36)
+    del broken["commit"]
+    (tmp_path / "heldout2_36.json").write_text(json.dumps(broken))
+    with pytest.raises(FormatError, match=r"heldout2_36.json: missing commit$"):
+        load_records(tmp_path)
+    (tmp_path / "heldout2_36.json").write_text("{")
+    with pytest.raises(FormatError, match=r"heldout2_36.json:1: not JSON \(Expecting"):
+        load_records(tmp_path)
+
+
+def test_gap_report_writes_the_table_and_the_published_one_is_current(tmp_path: Path, capsys):
+    (tmp_path / "default_240.json").write_text(json.dumps(_record("default", 240)))
+    out = gap_report(["--results", str(tmp_path), "--out", str(tmp_path / "report.md")])
+    printed = capsys.readouterr().out
+    assert out.read_text() in printed and printed.rstrip().endswith(str(out))
+    # the kept records: the eight base runs, each with its command, commit and world version; docs/gap_report.md
+    # is generated from them (make gap-report) and must not drift from them
+    published = load_records(REPO / "results" / "gap_benchmark")
+    assert {(r["world"], r["size"]) for r in published} == {(w, n) for w in ("default", "heldout", "heldout2", "heldout3")
+                                                            for n in (240, 36)}
+    assert all(r["command"].startswith("python diagnose.py +experiment=gap_benchmark ") for r in published)
+    assert (REPO / "docs" / "gap_report.md").read_text() == summary_markdown(published)
