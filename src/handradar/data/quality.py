@@ -366,7 +366,7 @@ def tracking_findings(fig: dict, meta_hands: int, q: RecordingQuality, file: str
         q.add("coverage", "warn", file, f"tracked hands cover {cov:.0%} of the spectrogram window ({where}; "
                                         f"warned below {WARN_COVERAGE:.0%})")
     if fig["longest_gap_s"] > MAX_INTERP_GAP_S and cov >= MIN_COVERAGE:
-        q.add("gap", "warn", file, f"a {fig['longest_gap_s']:.2f} s gap in tracking inside the window (over the "
+        q.add("gap", "warn", file, f"a {fig['longest_gap_s']:.3f} s gap in tracking inside the window (over the "
                                    f"{MAX_INTERP_GAP_S:g} s that interpolation bridges): untracked in the row")
     out = fig["out_of_view"]
     if out > MAX_OUT_OF_VIEW or out > WARN_OUT_OF_VIEW:
