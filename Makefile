@@ -12,7 +12,7 @@ WORLD       ?= default
 SIZE        ?= 240
 COMMA       := ,
 
-.PHONY: help install smoke run test test-full bench sweep tables mlflow-ui world world-gallery gap-benchmark gap-report fetch-data clean
+.PHONY: help install smoke run test test-full bench sweep data-efficiency data-efficiency-figure tables mlflow-ui world world-gallery gap-benchmark gap-report fetch-data clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-26s %s\n", $$1, $$2}'
@@ -25,10 +25,10 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP) ## create .venv and install handradar (editable) with its test tools
 
-smoke: $(STAMP) ## the whole pipeline on a tiny world in ~3 min: a table and a figure (not results)
+smoke: $(STAMP) ## the whole pipeline on a 60-recording world in about 1 min: a table and a figure (a check, not results)
 	$(PY) train.py +experiment=few_shot_5pct +debug=smoke $(ARGS)
 
-run: $(STAMP) ## the paper's 5 %* comparison on the reference world (~12 min cold): a table and a figure
+run: $(STAMP) ## the paper's 5 %* comparison on the reference world (about 9 min cold, 4 warm): a table and a figure
 	$(PY) train.py +experiment=few_shot_5pct $(ARGS)
 
 SFINGE3D_HERE = test -d data/sfinge3d/Dictionary || test -d $${HANDRADAR_SHARED:-../shared}/data/sfinge3d/Dictionary
@@ -46,6 +46,13 @@ bench: $(STAMP) ## benchmarks: throughput figures and ratios (benchmarks/results
 
 sweep: $(STAMP) ## the paper's few-shot grid over seeds (Hydra multirun, joblib launcher)
 	$(PY) train.py -m hydra/launcher=joblib +experiment=few_shot_5pct,few_shot_20pct,few_shot_50pct variants=all seed=1,2,3 $(ARGS)
+
+data-efficiency: $(STAMP) ## the data-efficiency runs: 1-36 real rows per gesture x seeds 1-3, and the paper's simulator
+	$(PY) train.py -m hydra/launcher=joblib +experiment=data_efficiency split.per_class=1,2,4,8,16,36 seed=1,2,3 threads=1 $(ARGS)
+	$(PY) train.py -m hydra/launcher=joblib +experiment=data_efficiency synth.fit_sim=none 'variants=[model_synth_only]' seed=1,2,3 threads=1 $(ARGS)
+
+data-efficiency-figure: $(STAMP) ## the data-efficiency curve (docs/figures/data_efficiency.png) from the MLflow runs
+	$(PY) -m experiments.data_efficiency $(ARGS)
 
 tables: $(STAMP) ## docs/results.md (every row with its command, commit, seeds, machine) + CSV tables from the MLflow runs
 	$(PY) -m experiments.tables $(ARGS)

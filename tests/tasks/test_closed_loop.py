@@ -30,16 +30,17 @@ TRUTH = {"sync_offset": {"offset_s": 0.05}, "tracking_jitter": {"sigma_s": 0.02}
 CLASSES = ["small", "wide", "two_hands"]
 
 
-def _measured(path: Path, radar, chain, per_class: int) -> Path:
+def _measured(path: Path, radar, chain, per_class: int, classes: list[str] = CLASSES) -> Path:
+    """``per_class`` rows of each of ``classes``; class c moves as motion c mod 3."""
     n_steps = int(round(chain.frames_per_window(radar) * radar.frame_period_s * RATE))
     times = np.arange(n_steps) / RATE
     rng = np.random.default_rng(0)
     sk, masks, labels = [], [], []
-    for i in range(per_class * len(CLASSES)):
-        c = i % len(CLASSES)
+    for i in range(per_class * len(classes)):
+        c = i % len(classes)
         # three motions: fingers barely flexing, a wide flex while the hand approaches, two hands
-        p, m = window(times, hands=2 if c == 2 else 1, seed=i, amplitude_rad=(0.15, 1.0, 0.5)[c],
-                      drift_m_s=(0.0, 0.0, -0.15 if c == 1 else 0.0),
+        p, m = window(times, hands=2 if c % 3 == 2 else 1, seed=i, amplitude_rad=(0.15, 1.0, 0.5)[c % 3],
+                      drift_m_s=(0.0, 0.0, -0.15 if c % 3 == 1 else 0.0),
                       centre=(rng.uniform(-0.05, 0.05), -0.06, rng.uniform(0.25, 0.35)))
         # tracker jitter on the stored skeleton: 2 mm, independent per step
         sk.append(p + rng.normal(0.0, 0.002, p.shape).astype(np.float32) * m[..., None, None])
@@ -49,11 +50,11 @@ def _measured(path: Path, radar, chain, per_class: int) -> Path:
     sim = SimFactory(radar, chain, skeleton_rate_hz=RATE)(TRUTH)
     with torch.no_grad():
         spec = sim(torch.as_tensor(skel), torch.as_tensor(mask)).numpy()
-    with open_writer(path, classes=CLASSES, radar=radar, chain=chain, skeleton_rate_hz=RATE, n_steps=n_steps,
+    with open_writer(path, classes=classes, radar=radar, chain=chain, skeleton_rate_hz=RATE, n_steps=n_steps,
                      config_hash="closed-loop-test") as w:
         for i, c in enumerate(labels):
             w.append(spec[i], c, skel[i], mask[i], 0.0,
-                     {"gesture": CLASSES[c], "subject": f"s{i % 3}", "angle_deg": 0.0, "hands": 2 if c == 2 else 1,
+                     {"gesture": classes[c], "subject": f"s{i % 3}", "angle_deg": 0.0, "hands": 2 if c % 3 == 2 else 1,
                       "occlusion": False, "repetition": i, "recording": f"r{i}"})
     return path
 
@@ -104,6 +105,37 @@ def test_closed_loop_through_train_fast(radar, short_chain, tmp_path: Path):
     assert report["n_calibration"] + report["n_evaluation"] == len(split["train"]) == 18
     metrics = OmegaConf.to_container(OmegaConf.load(run_dir / "metrics.json"))
     assert set(metrics) == {"test/acc_model_synth_only"} and 0.0 <= metrics["test/acc_model_synth_only"] <= 1.0
+
+
+def _one_row_job(data: Path, tmp_path: Path, extra: tuple[str, ...] = ()):
+    return compose_train([
+        "+experiment=data_efficiency", "split.per_class=1", "data=hdf5", f"data.path={data}",
+        f"paths.log_dir={tmp_path}/logs", f"paths.cache_dir={tmp_path}/cache", "logger=none", "print_table=false",
+        "checkpoint_interval_s=0", "skeleton_rate_hz=100.0", "split.test_fraction=0.34", "variants=[model_synth]",
+        "model.net._target_=tests.tasks.fakes.tiny_cnn", "~model.net.stem_stride", "trainer.max_steps=5",
+        "trainer.enable_progress_bar=false", "+synth.fit.candidates=[sync_offset]", "+synth.fit.rcs_exponents=[1.0]",
+        "synth.fit.n_boot=100", *extra])
+
+
+def test_one_row_per_gesture_fits(radar, short_chain, tmp_path: Path):
+    """One training row of each of 6 gestures: the closed loop fits on all 6, cross-fitted (folds=auto)."""
+    classes = [f"{c}{k}" for k in (1, 2) for c in CLASSES]
+    data = _measured(tmp_path / "measured.h5", radar, short_chain, per_class=3, classes=classes)
+    run_dir = run(_one_row_job(data, tmp_path), tmp_path / "run")
+    state = next((tmp_path / "logs").rglob("fit_report.json")).parent
+    report = json.loads((state / "fit_report.json").read_text())
+    split = np.load(state / "split.npz")
+    assert sorted(split["train"] % 6) == list(range(6)) and not np.intersect1d(split["train"], split["test"]).size
+    assert report["n_calibration"] + report["n_evaluation"] == 6
+    assert set(OmegaConf.to_container(OmegaConf.load(run_dir / "metrics.json"))) == {"test/acc_model_synth"}
+
+
+def test_too_few_rows_to_fit_say_so(radar, short_chain, tmp_path: Path):
+    from handradar.errors import TooFewRows
+
+    data = _measured(tmp_path / "measured.h5", radar, short_chain, per_class=3)  # 3 gestures x 1 training row
+    with pytest.raises(TooFewRows, match=r"fits the simulator on the split's 3 training rows .*synth.fit_sim=none"):
+        run(_one_row_job(data, tmp_path), tmp_path / "run")
 
 
 @pytest.mark.parametrize("exponent", [1.0, 0.5])

@@ -110,18 +110,26 @@ def stratified_partition(labels: np.ndarray, fractions: Sequence[float], seed: i
 
 def few_shot_split(labels: np.ndarray, fraction: float, *, seed: int,
                    test: Literal["remainder", "fixed"] = "remainder", test_fraction: float = 0.2,
-                   test_seed: int = 0) -> Split:
+                   test_seed: int = 0, per_class: int | None = None) -> Split:
     """Few-shot split: ``fraction`` of the real radar data of each class trains the classifier.
 
     test="remainder": the test set is every row not drawn (the pool is the drawn rows).
     test="fixed": a test set of ``test_fraction`` of each class drawn with ``test_seed`` (the same
     for every seed and fraction: the paper's starred rows); ``fraction`` of each class of the
     *complete* dataset is then drawn from the rest, and the pool is every non-test row.
+    per_class: that many training rows of each class instead of a fraction (all there are, if fewer);
+    one seed's rows are nested, the first k of a class being those of any smaller k.
     """
     labels = np.asarray(labels)
     every = np.arange(len(labels))
+    if per_class is not None and int(per_class) < 1:
+        raise ValueError(f"split.per_class must be at least 1, found {per_class}")
     if test == "remainder":
-        train = stratified_sample(labels, fraction, seed)
+        if per_class is None:
+            train = stratified_sample(labels, fraction, seed)
+        else:
+            train = np.sort(np.concatenate([_class_permutation(np.flatnonzero(labels == c), seed, c)[:int(per_class)]
+                                            for c in np.unique(labels)]))
         return Split(train=train, pool=train, test=np.setdiff1d(every, train))
     if test == "fixed":
         test_rows = stratified_sample(labels, test_fraction, test_seed)
@@ -129,7 +137,8 @@ def few_shot_split(labels: np.ndarray, fraction: float, *, seed: int,
         train = []
         for c in np.unique(labels[pool]):
             members = np.sort(pool[labels[pool] == c])
-            k = min(len(members), max(1, int(round(fraction * np.count_nonzero(labels == c)))))
+            want = int(per_class) if per_class is not None else max(1, int(round(fraction * np.count_nonzero(labels == c))))
+            k = min(len(members), want)
             train.append(_class_permutation(members, seed, c)[:k])
         return Split(train=np.concatenate(train) if train else pool[:0], pool=pool, test=test_rows)
     raise ValueError(f"test protocol must be 'remainder' or 'fixed', found {test!r}")
@@ -213,8 +222,11 @@ def make_split(spec: dict, labels: np.ndarray, meta: dict[str, np.ndarray], seed
     """The split a preset's ``split`` config names (``kind: few_shot`` or ``kind: ood``)."""
     kind = spec.get("kind", "few_shot")
     if kind == "few_shot":
+        per_class = spec.get("per_class")
         return check_split(few_shot_split(labels, float(spec["fraction"]), seed=seed, test=spec.get("test", "remainder"),
-                              test_fraction=float(spec.get("test_fraction", 0.2)), test_seed=int(spec.get("test_seed", 0))),
+                                          test_fraction=float(spec.get("test_fraction", 0.2)),
+                                          test_seed=int(spec.get("test_seed", 0)),
+                                          per_class=None if per_class is None else int(per_class)),
                            labels, spec)
     if kind == "ood":
         ood = spec["ood"]

@@ -230,6 +230,10 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             ood_kind = p.get("split.ood", "?")
             row, table, key = OOD_LABELS.get(ood_kind, ood_kind), ood, (list(OOD_LABELS).index(ood_kind)
                                                                         if ood_kind in OOD_LABELS else 9,)
+        elif p.get("split.per_class") not in (None, "None"):
+            fixed = p.get("split.test", "remainder") == "fixed"
+            n = int(float(p["split.per_class"]))
+            row, table, key = f"{n} per class" + ("*" if fixed else ""), few, (fixed, -1.0, n)
         elif "split.fraction" in p:
             fixed = p.get("split.test", "remainder") == "fixed"
             row, table, key = _pct(p["split.fraction"]) + ("*" if fixed else ""), few, (fixed, float(p["split.fraction"]))

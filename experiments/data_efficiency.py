@@ -1,0 +1,134 @@
+"""The data-efficiency curve from the MLflow runs of ``+experiment=data_efficiency`` (``make data-efficiency-figure``).
+
+    python -m experiments.data_efficiency [--tracking-uri URI] [--out FILE]
+
+Test accuracy against the real training rows per gesture (``split.per_class``), mean ± std over
+seeds: radar only; + synthetic data from the simulator fitted on those rows; synthetic only with
+that simulator; synthetic only with the paper's unfitted simulator (``synth.fit_sim=none``: no real
+row involved, drawn at 0); the pool's real spectrograms as the ceiling. Prints the curve as a
+markdown table, then the effects the fitted simulator kept at each size, then the figure's path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections import defaultdict
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+from handradar.atomic import atomic_path
+from handradar.provenance import REPO_ROOT
+from handradar.runs.tables import mean_std, stats
+
+TASK = "data_efficiency"
+# curve -> (metric, simulator fitted?)
+CURVES = {
+    "radar only": ("test/acc_radar_only", None),
+    "+ synthetic (fitted simulator)": ("test/acc_model_synth", True),
+    "synthetic only (fitted simulator)": ("test/acc_model_synth_only", True),
+    "synthetic only (paper's simulator)": ("test/acc_model_synth_only", False),
+    "real pool (ceiling)": ("test/acc_radar_pool", None),
+}
+
+
+def curves(records: Iterable[Mapping]) -> dict[str, dict[int, list[float]]]:
+    """{curve: {rows per gesture: [accuracy per seed]}} of the data-efficiency runs among ``records``
+    (``{"params": flat config, "metrics": {...}}``); the paper's simulator's points sit at 0 rows."""
+    out: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for rec in records:
+        p, m = rec["params"], rec["metrics"]
+        if p.get("task_name") != TASK or p.get("split.per_class") in (None, "None"):
+            continue
+        k = int(float(p["split.per_class"]))
+        fitted = p.get("synth.fit_sim", "none") not in ("none", "None")
+        for name, (metric, wants_fit) in CURVES.items():
+            if metric in m and (wants_fit is None or wants_fit == fitted):
+                out[name][0 if wants_fit is False else k].append(float(m[metric]))
+    return {name: dict(sorted(points.items())) for name, points in out.items()}
+
+
+def fitted_effects(records: Iterable[Mapping]) -> dict[int, list[str]]:
+    """{rows per gesture: the fitted simulator's kept effects, one entry per seed ("-": none)}."""
+    out: dict[int, list[str]] = defaultdict(list)
+    for rec in sorted(records, key=lambda r: str(r["params"].get("seed"))):
+        p = rec["params"]
+        if p.get("task_name") == TASK and "synth.fitted.effects" in p and p.get("split.per_class") not in (None, "None"):
+            out[int(float(p["split.per_class"]))].append(f"seed {p.get('seed')}: {p['synth.fitted.effects']}")
+    return dict(sorted(out.items()))
+
+
+def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int, list[str]]) -> str:
+    sizes = sorted({k for points in data.values() for k in points})
+    lines = ["| real rows per gesture | " + " | ".join(str(k) for k in sizes) + " |",
+             "|---|" + "---|" * len(sizes)]
+    for name in CURVES:
+        if name in data:
+            cells = [mean_std(data[name][k]) if k in data[name] else "–" for k in sizes]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if effects:
+        lines += ["", "| real rows per gesture | effects the fitted simulator kept |", "|---|---|"]
+        lines += [f"| {k} | {'; '.join(v)} |" for k, v in effects.items()]
+    return "\n".join(lines) + "\n"
+
+
+def plot(data: Mapping[str, Mapping[int, list[float]]], path: str | Path, *, chance: float | None = None) -> Path:
+    """Accuracy against real rows per gesture (log axis; 0 drawn at the left edge), mean ± std bars."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 3.8), dpi=120)
+    sizes = sorted({k for name, pts in data.items() for k in pts if k > 0})
+    zero_x = (sizes[0] / 2) if sizes else 0.5
+    for name, points in data.items():
+        ks = sorted(points)
+        xs = [k if k > 0 else zero_x for k in ks]
+        m = [stats(points[k])[0] for k in ks]
+        s = [stats(points[k])[1] if len(points[k]) > 1 else 0.0 for k in ks]
+        if name == "real pool (ceiling)":
+            mean = stats([v for k in ks for v in points[k]])[0]
+            ax.axhline(mean, color="black", lw=1, ls=":", label=f"{name}: {mean:.3f}")
+        elif ks == [0]:
+            ax.errorbar(xs, m, yerr=s, fmt="s", capsize=3, label=name)
+        else:
+            ax.errorbar(xs, m, yerr=s, marker="o", capsize=3, label=name)
+    if chance is not None:
+        ax.axhline(chance, color="grey", lw=1, ls="--", label="chance")
+    ax.set_xscale("log", base=2)
+    ticks = [zero_x, *sizes]
+    ax.set_xticks(ticks, ["0", *(str(k) for k in sizes)])
+    ax.set_xlabel("real training rows per gesture")
+    ax.set_ylabel("test accuracy")
+    ax.set_ylim(0, 1)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+    return path
+
+
+def main(argv: list[str] | None = None) -> Path:
+    from experiments.tables import DEFAULT_URI, load_records
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tracking-uri", default=DEFAULT_URI)
+    ap.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "figures" / "data_efficiency.png")
+    args = ap.parse_args(argv)
+    records = load_records(args.tracking_uri)
+    data = curves(records)
+    if not data:
+        raise SystemExit(f"no finished {TASK} runs in {args.tracking_uri}: run `make data-efficiency` first")
+    print(markdown(data, fitted_effects(records)))
+    out = plot(data, args.out)
+    print(out)
+    return out
+
+
+if __name__ == "__main__":
+    from handradar.runs.cli import run_cli
+
+    run_cli(lambda: main(sys.argv[1:]), usage="python -m experiments.data_efficiency [--tracking-uri URI] [--out FILE]")

@@ -1,0 +1,68 @@
+"""The data-efficiency curve: records grouped by rows per gesture and simulator, drawn and tabled."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from experiments.data_efficiency import curves, fitted_effects, markdown, plot
+from handradar.data.splits import few_shot_split
+from tests.tasks.fakes import compose_train
+
+
+def rec(k: int, seed: int, fit: str, **metrics: float) -> dict:
+    params = {"task_name": "data_efficiency", "split.per_class": str(k), "seed": str(seed), "synth.fit_sim": fit}
+    if fit != "none":
+        params["synth.fitted.effects"] = "sync_offset" if k > 1 else "-"
+    return {"params": params, "metrics": {f"test/acc_{m}": v for m, v in metrics.items()}}
+
+
+RECORDS = [
+    rec(1, 1, "effects", radar_only=0.2, model_synth=0.5, model_synth_only=0.4, radar_pool=0.7),
+    rec(1, 2, "effects", radar_only=0.3, model_synth=0.6, model_synth_only=0.5, radar_pool=0.7),
+    rec(4, 1, "effects", radar_only=0.4, model_synth=0.7, model_synth_only=0.6, radar_pool=0.7),
+    rec(4, 1, "none", model_synth_only=0.35),
+    rec(1, 2, "none", model_synth_only=0.45),
+    {"params": {"task_name": "few_shot_5pct", "split.fraction": "0.05"}, "metrics": {"test/acc_radar_only": 0.9}},
+]
+
+
+def test_curves_group_by_rows_and_simulator():
+    got = curves(RECORDS)
+    assert got["radar only"] == {1: [0.2, 0.3], 4: [0.4]}
+    assert got["+ synthetic (fitted simulator)"] == {1: [0.5, 0.6], 4: [0.7]}
+    assert got["synthetic only (fitted simulator)"] == {1: [0.4, 0.5], 4: [0.6]}
+    assert got["synthetic only (paper's simulator)"] == {0: [0.35, 0.45]}  # no real row involved
+    assert got["real pool (ceiling)"] == {1: [0.7, 0.7], 4: [0.7]}
+    assert fitted_effects(RECORDS) == {1: ["seed 1: -", "seed 2: -"], 4: ["seed 1: sync_offset"]}
+
+
+def test_markdown_and_figure(tmp_path: Path):
+    data = curves(RECORDS)
+    md = markdown(data, fitted_effects(RECORDS))
+    assert "| real rows per gesture | 0 | 1 | 4 |" in md
+    assert "| radar only | – | 0.250 ± 0.071 (n=2) | 0.400 |" in md
+    assert "| synthetic only (paper's simulator) | 0.400 ± 0.071 (n=2) | – | – |" in md
+    assert plot(data, tmp_path / "f.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_per_class_split_is_nested_and_exact():
+    labels = np.repeat(np.arange(5), 20)
+    prev = None
+    for k in (1, 2, 4, 8):
+        s = few_shot_split(labels, 0.05, seed=3, test="fixed", per_class=k)
+        assert np.bincount(labels[s.train], minlength=5).tolist() == [k] * 5
+        assert not np.intersect1d(s.train, s.test).size and len(s.pool) == 80
+        if prev is not None:
+            assert set(prev) <= set(s.train)
+        prev = s.train
+    with pytest.raises(ValueError, match="per_class must be at least 1"):
+        few_shot_split(labels, 0.05, seed=3, test="fixed", per_class=0)
+
+
+def test_preset_composes():
+    cfg = compose_train(["+experiment=data_efficiency", "split.per_class=2"])
+    assert cfg.task_name == "data_efficiency" and cfg.split.per_class == 2 and cfg.split.test == "fixed"
+    assert list(cfg.variants) == ["radar_only", "model_synth", "model_synth_only", "radar_pool"]
