@@ -161,7 +161,7 @@ def check_split(split: Split, labels: np.ndarray, spec: dict, classes: Sequence[
     what = ("at least 2 gestures with at least 2 rows each (1 to train on, 1 to test on)"
             if spec.get("kind", "few_shot") == "few_shot" else
             "in-distribution rows of at least 2 gestures to train on and out-of-distribution rows to test on")
-    raise TooFewRows(f"too few rows for the split {spec}: training needs {what}; the data hold "
+    raise TooFewRows(f"too few rows for the split {({k: v for k, v in spec.items() if v is not None})}: training needs {what}; the data hold "
                      f"{class_counts(labels, classes)} (the split trains on {len(split.train)} rows of {trained} "
                      f"gesture(s) and tests on {len(split.test)})")
 

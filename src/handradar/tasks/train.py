@@ -4,6 +4,7 @@ A job (one composed config, one seed) trains several classifiers ("variants") an
 
 - ``<run_dir>/metrics.json``: flat ``{"test/acc_<variant>": accuracy in [0, 1]}``;
 - ``<run_dir>/confusion/<variant>.json`` and ``<run_dir>/figures/confusion_<variant>.png``;
+- ``<run_dir>/figures/summary.png`` (variants jobs): accuracy by variant, real vs synthetic spectrograms;
 - one MLflow run with the resolved config (params + ``config.yaml``), tags (preset, seed, code
   version, data hash, job hash, run dir), per-epoch training metrics ``<variant>/train/*``, the
   final metrics and the figures.
@@ -22,6 +23,9 @@ few-shot fractions of class subsets, against the same training from scratch. Any
 a dotted function name ``fn(job: Job) -> {metric name: number}`` (e.g. a synthesis-fit job): it gets
 the loaded real data (``job.real``), the state folder (``job.state``, for resumable work), the
 tracker and ``job.cfg``, and its metrics go to metrics.json and MLflow like the built-in kinds.
+
+Progress: each stage (the data, what the variants add, each variant, the summary) is announced on
+the log with its number, the elapsed time and the next stage (handradar.runs.progress).
 
 Resuming: the job's state (checkpoints, finished variants, CGAN samples, the MLflow run id) lives
 in ``<state_dir>/<job hash>``; the hash covers the config (paths, logging and caches excluded) and
@@ -404,8 +408,8 @@ class Job:
                                            cache_dir=Path(self.cfg.synth.cache_dir) / "fit", effects=mode == "effects")
         except TooFewRows as exc:  # raised before any fit: say which rows and how to get out of it
             raise TooFewRows(f"synth.fit_sim={mode} fits the simulator on the split's {len(split.train)} training "
-                             f"rows (settings synth.fit.*): {exc}; use more rows per gesture, a larger "
-                             "split.fraction, or synth.fit_sim=none") from None
+                             f"rows (settings synth.fit.*): {exc}; use more rows per gesture (split.fraction, "
+                             "split.per_class), or synth.fit_sim=none") from None
         if self.rank_zero:
             write_report(self.state / "fit_report.json", diag.report, n_doppler=data.chain.stft_len,
                          n_columns=data.chain.n_columns)
