@@ -17,9 +17,9 @@ from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from handradar.atomic import atomic_path
 from handradar.provenance import REPO_ROOT
 from handradar.runs.tables import mean_std, stats
+from handradar.viz.common import pyplot, save_figure
 
 TASK = "data_efficiency"
 # curve -> (metric, simulator fitted?)
@@ -74,12 +74,7 @@ def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int
 
 def plot(data: Mapping[str, Mapping[int, list[float]]], path: str | Path, *, chance: float | None = None) -> Path:
     """Accuracy against real rows per gesture (log axis; 0 drawn at the left edge), mean ± std bars."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.0, 3.8), dpi=120)
+    fig, ax = pyplot().subplots(figsize=(6.0, 3.8), dpi=120)
     sizes = sorted({k for name, pts in data.items() for k in pts if k > 0})
     zero_x = (sizes[0] / 2) if sizes else 0.5
     for name, points in data.items():
@@ -104,11 +99,7 @@ def plot(data: Mapping[str, Mapping[int, list[float]]], path: str | Path, *, cha
     ax.set_ylim(0, 1)
     ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)
 
 
 def main(argv: list[str] | None = None) -> Path:

@@ -7,18 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
-from handradar.atomic import atomic_path
+from handradar.viz.common import pyplot, save_figure, spectrogram_panel
 
 
 def plot_summary(accuracy: Mapping[str, float], path: str | Path, *, chance: float | None = None,
                  pairs: Sequence[tuple[str, np.ndarray, np.ndarray]] = (), title: str = "") -> Path:
     """Accuracy per variant (bars, chance as a dashed line) and, per pair ``(gesture, real, synthetic)``
     of (Doppler, time) spectrograms in [0, 1] of the same recording, the two side by side."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     names = list(accuracy)
     n_pairs = len(pairs)
     fig = plt.figure(figsize=(4.2 + 1.5 * n_pairs, 3.4), dpi=110)
@@ -38,14 +34,6 @@ def plot_summary(accuracy: Mapping[str, float], path: str | Path, *, chance: flo
     ax.set_title(title or "accuracy by variant", fontsize=8)
     for j, (gesture, real, synthetic) in enumerate(pairs):
         for row, (image, kind) in enumerate(((real, "real"), (synthetic, "synthetic"))):
-            a = fig.add_subplot(grid[row, 1 + j])
-            a.imshow(np.asarray(image), origin="lower", aspect="auto", vmin=0, vmax=1, cmap="viridis")
-            a.set_xticks([])
-            a.set_yticks([])
-            a.set_title(f"{gesture}\n{kind}" if row == 0 else kind, fontsize=7)
+            spectrogram_panel(fig.add_subplot(grid[row, 1 + j]), image, f"{gesture}\n{kind}" if row == 0 else kind)
     fig.tight_layout()
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
