@@ -59,17 +59,26 @@ def _measured(path: Path, radar, chain, per_class: int, classes: list[str] = CLA
     return path
 
 
+def _job(preset: str, data: Path, tmp_path: Path, *, variant: str, steps: int, candidates: str, n_boot: int,
+         split: tuple[str, ...]):
+    """A train.py job on the measured rows with a tiny CNN, its simulator fitted on ``candidates``."""
+    return compose_train([
+        f"+experiment={preset}", "data=hdf5", f"data.path={data}", f"paths.log_dir={tmp_path}/logs",
+        f"paths.cache_dir={tmp_path}/cache", "logger=none", "print_table=false", "checkpoint_interval_s=0",
+        "skeleton_rate_hz=100.0", *split, f"variants=[{variant}]", "model.net._target_=tests.tasks.fakes.tiny_cnn",
+        "~model.net.stem_stride", f"trainer.max_steps={steps}", "trainer.enable_progress_bar=false",
+        "synth.fit_sim=effects", f"+synth.fit.candidates=[{candidates}]", "+synth.fit.rcs_exponents=[1.0]",
+        f"synth.fit.n_boot={n_boot}"])
+
+
+FULL_SPLIT = ("split.fraction=1.0", "split.test_fraction=0.25")
+
+
 @pytest.mark.slow
 def test_fitted_simulator_recovers_smoothing_and_offset_and_synthetic_only_learns(radar, chain, tmp_path: Path):
     data = _measured(tmp_path / "measured.h5", radar, chain, per_class=16)
-    cfg = compose_train([
-        "+experiment=few_shot_5pct", "data=hdf5", f"data.path={data}", f"paths.log_dir={tmp_path}/logs",
-        f"paths.cache_dir={tmp_path}/cache", "logger=none", "print_table=false", "checkpoint_interval_s=0",
-        "skeleton_rate_hz=100.0", "split.fraction=1.0", "split.test_fraction=0.25",
-        "variants=[model_synth_only]", "model.net._target_=tests.tasks.fakes.tiny_cnn", "~model.net.stem_stride",
-        "trainer.max_steps=150", "trainer.enable_progress_bar=false",
-        "synth.fit_sim=effects", "+synth.fit.candidates=[sync_offset,tracking_jitter,noise]",
-        "+synth.fit.rcs_exponents=[1.0]", "synth.fit.n_boot=300"])
+    cfg = _job("few_shot_5pct", data, tmp_path, variant="model_synth_only", steps=150,
+               candidates="sync_offset,tracking_jitter,noise", n_boot=300, split=FULL_SPLIT)
     run_dir = run(cfg, tmp_path / "run")
     state = next((tmp_path / "logs").rglob("fitted_sim.yaml"))
     fitted = OmegaConf.to_container(OmegaConf.load(state))
@@ -85,14 +94,8 @@ def test_closed_loop_through_train_fast(radar, short_chain, tmp_path: Path):
     sees the 18 training rows only (9 + 9 in its own split), never the 6 test rows, and recovers both
     missing settings exactly (measured; with 12 rows it picks tracking_jitter alone at 0.04 s)."""
     data = _measured(tmp_path / "measured.h5", radar, short_chain, per_class=8)
-    cfg = compose_train([
-        "+experiment=few_shot_5pct", "data=hdf5", f"data.path={data}", f"paths.log_dir={tmp_path}/logs",
-        f"paths.cache_dir={tmp_path}/cache", "logger=none", "print_table=false", "checkpoint_interval_s=0",
-        "skeleton_rate_hz=100.0", "split.fraction=1.0", "split.test_fraction=0.25",
-        "variants=[model_synth_only]", "model.net._target_=tests.tasks.fakes.tiny_cnn", "~model.net.stem_stride",
-        "trainer.max_steps=10", "trainer.enable_progress_bar=false",
-        "synth.fit_sim=effects", "+synth.fit.candidates=[sync_offset,tracking_jitter]",
-        "+synth.fit.rcs_exponents=[1.0]", "synth.fit.n_boot=200"])
+    cfg = _job("few_shot_5pct", data, tmp_path, variant="model_synth_only", steps=10,
+               candidates="sync_offset,tracking_jitter", n_boot=200, split=FULL_SPLIT)
     run_dir = run(cfg, tmp_path / "run")
     state = next((tmp_path / "logs").rglob("fitted_sim.yaml")).parent
     fitted = OmegaConf.to_container(OmegaConf.load(state / "fitted_sim.yaml"))
@@ -107,14 +110,9 @@ def test_closed_loop_through_train_fast(radar, short_chain, tmp_path: Path):
     assert set(metrics) == {"test/acc_model_synth_only"} and 0.0 <= metrics["test/acc_model_synth_only"] <= 1.0
 
 
-def _one_row_job(data: Path, tmp_path: Path, extra: tuple[str, ...] = ()):
-    return compose_train([
-        "+experiment=data_efficiency", "split.per_class=1", "data=hdf5", f"data.path={data}",
-        f"paths.log_dir={tmp_path}/logs", f"paths.cache_dir={tmp_path}/cache", "logger=none", "print_table=false",
-        "checkpoint_interval_s=0", "skeleton_rate_hz=100.0", "split.test_fraction=0.34", "variants=[model_synth]",
-        "model.net._target_=tests.tasks.fakes.tiny_cnn", "~model.net.stem_stride", "trainer.max_steps=5",
-        "trainer.enable_progress_bar=false", "+synth.fit.candidates=[sync_offset]", "+synth.fit.rcs_exponents=[1.0]",
-        "synth.fit.n_boot=100", *extra])
+def _one_row_job(data: Path, tmp_path: Path):
+    return _job("data_efficiency", data, tmp_path, variant="model_synth", steps=5, candidates="sync_offset", n_boot=100,
+                split=("split.per_class=1", "split.test_fraction=0.34"))
 
 
 def test_one_row_per_gesture_fits(radar, short_chain, tmp_path: Path):
