@@ -8,14 +8,7 @@ and the gap diagnosis.
 gap = 1 - SSIM(measured, simulated), averaged over examples. An effect's ``gap_closed`` is
 (gap_before - gap_after) / gap_before on the evaluation split.
 
-A second gap, the speckle deviance, treats each measured pixel's power as speckle around the
-simulated one, its expectation: exponential, the statistics of many scatterers' random phases. It is
-the exponential deviance at the row's maximum-likelihood power scale, log(mean r) - mean(log r) for
-the pixel ratios r = measured / simulated power (>= 0, 0 only when the two are proportional; Euler's
-gamma, 0.577, in expectation for pure speckle around the right expectation). Unlike SSIM it is
-asymmetric: power the simulation misses costs more than power it has in excess. Pass 1 - deviance
-as the score of gap_closed and the bootstraps: the gap is then the deviance. Confidence intervals come from a
-paired bootstrap over evaluation examples (the same resampled examples for before and after), so
+Confidence intervals come from a paired bootstrap over evaluation examples (the same resampled examples for before and after), so
 the spread of per-example difficulty cancels out of the comparison.
 
 Public API:
@@ -23,7 +16,6 @@ Public API:
     ssim(pred, target, reduction="elementwise_mean" | "none") -> scalar or (B,)   (differentiable)
     ssim_loss(pred, target) -> 1 - mean SSIM;  fast_ssim_loss: same value and gradient, faster CPU backward
     per_example_ssim(measured, simulated) -> (N,) numpy;  per_example_mse(measured, simulated) -> (N,)
-    speckle_deviance(measured, simulated, dynamic_range_db) -> (N,) numpy
     gap_closed(ssim_before, ssim_after) -> float
     bootstrap_gap_closed(...) -> Bootstrap;  bootstrap_difference(...) -> (difference, 95 % CI)
 """
@@ -111,21 +103,6 @@ def per_example_ssim(measured: torch.Tensor, simulated: torch.Tensor) -> np.ndar
 def per_example_mse(measured: torch.Tensor, simulated: torch.Tensor) -> np.ndarray:
     d = torch.as_tensor(measured, dtype=torch.float32) - torch.as_tensor(simulated, dtype=torch.float32)
     return d.pow(2).flatten(1).mean(1).detach().cpu().numpy().astype(np.float64)
-
-
-def speckle_deviance(measured: torch.Tensor | np.ndarray, simulated: torch.Tensor | np.ndarray,
-                     dynamic_range_db: float) -> np.ndarray:
-    """Speckle deviance of each (H, W) pair in [0, 1] (module doc): shape (N,) float64.
-
-    A value x in [0, 1] is the power 10 ** (dynamic_range_db (x - 1) / 10) relative to the row's peak
-    (handradar.radar.chain.power_to_unit). Pixels clamped at the display floor count at the floor's
-    power, which bounds every ratio to +-dynamic_range_db: what lies below the floor is not known.
-    """
-    scale = float(dynamic_range_db) / 10.0 * np.log(10.0)  # x -> log power (natural units)
-    m = torch.as_tensor(measured, dtype=torch.float64).flatten(1)
-    s = torch.as_tensor(simulated, dtype=torch.float64).flatten(1)
-    log_r = scale * (m - s)  # log(measured / simulated power), pixel by pixel
-    return (torch.logsumexp(log_r, 1) - np.log(log_r.shape[1]) - log_r.mean(1)).numpy()
 
 
 def gap_closed(ssim_before: np.ndarray, ssim_after: np.ndarray) -> float:

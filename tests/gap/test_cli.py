@@ -36,7 +36,7 @@ def _compose(overrides):
 def test_benchmark_names_the_command_that_reproduces_it_without_output_locations():
     """The results file's command: the job's overrides as typed (shell-quoted), minus where outputs go."""
     assert command_line("diagnose.py", OUTPUT_KEYS) is None  # outside a Hydra job
-    overrides = ["+experiment=gap_benchmark", "world=heldout2", "benchmark.size=36", "diagnose.noise_floor=true",
+    overrides = ["+experiment=gap_benchmark", "world=heldout2", "benchmark.size=36", "diagnose.folds=1",
                  "diagnose.coherences=[1.0,0.5]", "benchmark.state_dir=/tmp/st", "benchmark.record_dir=/tmp/r",
                  "progress=false"]
     with initialize_config_dir(str(config_dir()), version_base=VERSION_BASE):
@@ -48,7 +48,7 @@ def test_benchmark_names_the_command_that_reproduces_it_without_output_locations
     finally:
         HydraConfig.instance().cfg = None  # other tests run outside a Hydra job
     assert cmd == ("python diagnose.py +experiment=gap_benchmark world=heldout2 benchmark.size=36 "
-                   "diagnose.noise_floor=true 'diagnose.coherences=[1.0,0.5]'")
+                   "diagnose.folds=1 'diagnose.coherences=[1.0,0.5]'")
     assert world == "heldout2" and group_choice("world") is None  # outside a Hydra job: not known
 
 

@@ -45,7 +45,7 @@ def test_record_keeps_provenance_and_each_verdict():
 
 
 def test_summary_table_one_column_per_run_legend_once():
-    records = [_record("heldout", 36, "inconclusive"), _record("default", 240),
+    records = [_record("heldout", 36, "inconclusive"), _record("default", 240), _record("heldout2", 36, "occlusion"),
                _record("heldout", 240, "none", variants=[{"name": "one_split", "what": "one split", "command": "cmd v",
                                                            "commit": "1234567", "world_version": "world/2",
                                                            "scores": {"effects_correct": 0, "effects_total": 1,
@@ -54,11 +54,15 @@ def test_summary_table_one_column_per_run_legend_once():
                                                                       "controls_inconclusive": 0}}])]
     md = summary_markdown(sorted(records, key=lambda r: (-r["size"], r["world"] != "default")))
     lines = md.splitlines()
-    assert "| case (truth) | default 240 | heldout 240 | heldout 36 |" in lines
-    assert "| palm (palm) | ✓ (+0.125) | ✗ none (+0.125) | ✗ inconclusive ~620 (+0.125) |" in lines
-    assert "| nothing (none) | ✓ | ✓ | ✓ |" in lines
-    assert "| **effects named** | **1 of 1** | **0 of 1** | **0 of 1** |" in lines
-    assert md.count("A cell is ✓") == 1  # the legend, written once
+    assert "| case (truth) | default 240 | heldout 240 | heldout 36 | heldout2 36 |" in lines
+    # palm is judged "must not mislead": none, or inconclusive leading with it, is found but undecided
+    assert ("| palm (palm) | ✓ (+0.125) | (✓) none (+0.125) | (✓) inconclusive ~620 (+0.125) "
+            "| ✗ occlusion (+0.125) |") in lines
+    assert "| nothing (none) | ✓ | ✓ | ✓ | ✓ |" in lines
+    assert "| **effects named** | **1 of 1** | **0 of 1** | **0 of 1** | **0 of 1** |" in lines
+    assert "| **effects found** | 1 of 1 | 1 of 1 | 1 of 1 | 0 of 1 |" in lines
+    assert "| **wrong causes** | **0** | **0** | **0** | **1** |" in lines
+    assert md.count("(✓): found but undecided") == 1  # the legend, written once
     assert "`python diagnose.py world=heldout` at `abc123d.dirty` (world/3), seed 3, x86_64, 2 CPUs, no GPU" in md
     assert "| heldout 240 | one split | 0 of 1 | 1 of 1 | 1, 0 | `cmd v` | `1234567` (world/2) |" in lines
     assert "(no records in somewhere)" in summary_markdown([], "somewhere")

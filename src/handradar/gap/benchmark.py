@@ -66,7 +66,7 @@ from handradar.errors import HandradarError
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
 from handradar.gap.job import headline_metrics, write_outputs
-from handradar.gap.records import benchmark_record, record_name
+from handradar.gap.records import benchmark_record, found, record_name, wrong_cause
 from handradar.gap.report import VERDICTS
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import code_version, config_hash, machine
@@ -203,7 +203,7 @@ class BenchmarkWorlds:
 
 
 def score(results: Sequence[Mapping]) -> dict:
-    """Confusion matrix (cases x attributions), top-1 correct count ("inconclusive" counts as wrong),
+    """Confusion matrix (cases x attributions), named (top-1 correct), found (:func:`found`), wrong causes,
     inconclusive count, mean gap_closed of the withheld effects."""
     labels = [*EFFECTS, *VERDICTS]
     rows = [r["case"] for r in results]
@@ -219,11 +219,7 @@ def score(results: Sequence[Mapping]) -> dict:
             "effects_inconclusive": sum(r["cause"] == "inconclusive" for r in effect_cases),
             "controls_inconclusive": sum(r["cause"] == "inconclusive" for r in controls),
             "mean_true_gap_closed": float(np.mean(closed)) if closed else None,
-            "speckle_first": sum(bool(r.get("speckle")) and r["speckle"]["leader"] == r["truth"] for r in effect_cases),
-            "speckle_clearly_first": sum(_speckle_clearly_first(r.get("speckle"), r["truth"]) for r in effect_cases),
-            # the rows specificity_decides names (on or off), and those whose leader is the right answer
-            "specificity_named": sum(bool(r.get("specific_lead")) for r in results),
-            "specificity_right": sum(bool(r.get("specific_lead")) and r.get("top_candidate") == r["truth"] for r in results),
+            "effects_found": sum(found(r) for r in effect_cases), "wrong_causes": sum(wrong_cause(r) for r in results),
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
@@ -342,35 +338,12 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "baseline_ssim": report["baseline"]["ssim"], "after_effects": report["after"]["effects"],
             "after_gap_closed": report["after"]["gap_closed"], "lead_ci95": report["evidence"].get("lead_ci95"),
             "recordings_needed": report["evidence"].get("recordings_needed"),
-            "decided_by": report["evidence"].get("decided_by"),
-            # what diagnose.specificity_decides names beyond the rule on gap_closed and the lead (on or off),
-            # and the specificity evidence of the two it weighs (the leader is the top candidate)
-            "specific_lead": bool(report["evidence"].get("specific_lead")),
             "leader_specificity": top.get("specificity") if top else None,
-            "runner_up_specificity": (cands.get(report["evidence"].get("runner_up")) or {}).get("specificity"),
-            "speckle": _speckle_result(report, case.truth),
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
             "folds": report["settings"]["folds"],  # as resolved (diagnose.folds = auto: by the rows)
             # step 0's generic settings and the mean SSIM of each grid point (not the effects' grids)
             "calibration": {k: v for k, v in (report["baseline"].get("calibration") or {}).items()
                             if k not in ("effects", "effect_grids")}}
-
-
-def _speckle_result(report: Mapping, truth: str) -> dict | None:
-    """The candidates ranked by the speckle deviance (evidence.speckle): leader, lead CI, the true effect's rank."""
-    sp = report["evidence"].get("speckle")
-    if not sp or sp.get("leader") is None:
-        return None
-    ranked = sorted(report["candidates"], key=lambda c: c["speckle"]["gap_closed"], reverse=True)
-    names = [c["effect"] for c in ranked]
-    true = ranked[names.index(truth)]["speckle"] if truth in names else None
-    return {**sp, "true_rank": names.index(truth) + 1 if true else None,
-            "true_gap_closed": true["gap_closed"] if true else None, "true_ci95": true["ci95"] if true else None}
-
-
-def _speckle_clearly_first(sp: Mapping | None, truth: str) -> bool:
-    """The speckle score puts ``truth`` first, its CI above 0 and its lead's CI above 0."""
-    return bool(sp and sp["leader"] == truth and sp["ci95"][0] > 0 and (sp["lead_ci95"] is None or sp["lead_ci95"][0] > 0))
 
 
 DEFAULT_COMMAND = "python diagnose.py +experiment=gap_benchmark"
@@ -388,18 +361,10 @@ def split_text(diag_cfg: Mapping, folds: int) -> str:
 
 def _attributed(r: Mapping) -> str:
     """A case's answer; an inconclusive one with the recordings estimated to decide it."""
-    if r["cause"] != "inconclusive":  # a cause the lead alone would not name says so
-        return r["cause"] + (" (by specificity)" if r.get("decided_by") == "specificity" else "")
+    if r["cause"] != "inconclusive":
+        return r["cause"]
     n = r.get("recordings_needed")
     return "inconclusive (no estimate)" if n is None else f"inconclusive (~{n} recordings)"
-
-
-def _speckle_cell(sp: Mapping | None, sgn: Callable[[float], str]) -> str:
-    if not sp:
-        return "-"
-    lead = "" if not sp.get("lead_ci95") else f", [{sgn(sp['lead_ci95'][0])}, {sgn(sp['lead_ci95'][1])}] vs {sp['runner_up']}"
-    rank = "" if sp.get("true_rank") is None else f"; true {sp['true_rank']}"
-    return f"{sp['leader']} ({sgn(sp['gap_closed'])} [{sgn(sp['ci95'][0])}, {sgn(sp['ci95'][1])}]){lead}{rank}"
 
 
 def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, settings: Mapping) -> str:
@@ -407,23 +372,18 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
     lines = ["# Gap diagnosis benchmark: withheld effects", "",
              "Each row is a reference world with one effect on (the other vocabulary effects off), diagnosed by the "
              "paper's simulator without that effect; `nothing` and `iq_imbalance` are controls whose right answer "
-             "is `none` (no vocabulary effect / an effect outside the vocabulary); `inconclusive` (the leader is "
-             "neither significant and clearly ahead nor bounded below `min_gap_closed`; with the recordings estimated "
-             f"to decide it) counts as wrong in every row. Generated by `{settings.get('command') or DEFAULT_COMMAND}`.", "",
-             f"**Top-1 attribution: {scores['effects_correct']} of {scores['effects_total']} withheld effects; "
+             "is `none` (no vocabulary effect / an effect outside the vocabulary). Found: the true effect named, or "
+             "leading an `inconclusive` verdict (with the recordings estimated to decide it); palm also by `none` or "
+             "`inconclusive` with no other effect named (docs/gap_validation.md). "
+             f"Generated by `{settings.get('command') or DEFAULT_COMMAND}`.", "",
+             f"**Named: {scores['effects_correct']} of {scores['effects_total']} withheld effects; found: "
+             f"{scores.get('effects_found', '-')} of {scores['effects_total']}; wrong causes named: "
+             f"{scores.get('wrong_causes', '-')}; "
              f"controls: {scores['controls_correct']} of {scores['controls_total']} say none; inconclusive: "
              f"{scores['effects_inconclusive']} of {scores['effects_total']} withheld effects, "
              f"{scores['controls_inconclusive']} of {scores['controls_total']} controls.** "
              f"Mean gap_closed by the withheld effect: {sgn(scores['mean_true_gap_closed'])}; "
-             f"by the greedy selection: {sgn(scores['mean_after_gap_closed'])}. "
-             f"Speckle deviance (evidence only, no verdict): the true effect leads in {scores.get('speckle_first', 0)} "
-             f"of {scores['effects_total']}, with its CI and its lead's CI above 0 in "
-             f"{scores.get('speckle_clearly_first', 0)}. "
-             f"Specificity (`diagnose.specificity_decides`, {'on' if settings.get('specificity_decides') else 'off'}): "
-             f"a leader the rule on gap_closed and the lead does not name, named for its specific gain, in "
-             f"{scores.get('specificity_named', 0)} of {scores['effects_total'] + scores['controls_total']} cases, the right "
-             f"answer in {scores.get('specificity_right', 0)} "
-             "(marked `(by specificity)` when on).", "",
+             f"by the greedy selection: {sgn(scores['mean_after_gap_closed'])}.", "",
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "over the same window of each recording (mean / median): how visible the withheld effect is in the radar "
              "data at all. `world's change on the simulator` is the gap_closed [95 % CI] of the diagnosis's baseline "
@@ -431,14 +391,11 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              "effect leaves the radar data unchanged): what a candidate reproducing the effect would close on top of "
              "the simulator's generic mismatch, the reference for the true effect's gap_closed; r: the Pearson "
              "correlation, over every pixel, of the true effect's candidate's change with the world's (does the "
-             "candidate change the spectrograms the way the effect does?). `speckle deviance` ranks the same fitted "
-             "candidates by the speckle deviance instead of 1 - SSIM (handradar.metrics.speckle_deviance: measured power "
-             "as exponential speckle around the simulated expectation): its leader (gap_closed [95 % CI]), the lead's "
-             "CI over its runner-up, and the true effect's rank.", "",
-             "| world | truth | attributed cause | correct | gap_closed of the true effect [95 % CI] | rank | "
+             "candidate change the spectrograms the way the effect does?).", "",
+             "| world | truth | attributed cause | found | gap_closed of the true effect [95 % CI] | rank | "
              "top candidate (gap_closed) | runner-up lead CI | after: effects (gap_closed) | baseline SSIM | "
-             "radar signature | world's change on the simulator | speckle deviance: leader, lead CI, true rank |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "radar signature | world's change on the simulator |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         ci = r["true_ci95"]
         true = "-" if r["true_gap_closed"] is None else f"{sgn(r['true_gap_closed'])} [{sgn(ci[0])}, {sgn(ci[1])}]"
@@ -448,10 +405,10 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
                f"{sgn(r['reference_gap_closed'])} [{sgn(r['reference_ci95'][0])}, {sgn(r['reference_ci95'][1])}]"
                + ("" if r.get("change_correlation") is None else f"; r {fmt_number(r['change_correlation'])}"))
         lead = "-" if not r.get("lead_ci95") else f"[{sgn(r['lead_ci95'][0])}, {sgn(r['lead_ci95'][1])}] vs {r['runner_up']}"
-        lines.append(f"| {r['case']} | {r['truth']} | {_attributed(r)} | {'yes' if r['correct'] else 'no'} | {true} | "
+        lines.append(f"| {r['case']} | {r['truth']} | {_attributed(r)} | {'yes' if found(r) else 'no'} | {true} | "
                      f"{r['true_rank'] or '-'} | {r['top_candidate']} ({sgn(r['top_gap_closed'])}) | {lead} | "
                      f"{', '.join(r['after_effects']) or '-'} ({sgn(r['after_gap_closed'])}) | "
-                     f"{fmt_number(r['baseline_ssim'])} | {sig} | {ref} | {_speckle_cell(r.get('speckle'), sgn)} |")
+                     f"{fmt_number(r['baseline_ssim'])} | {sig} | {ref} |")
     lines += ["", f"![confusion]({figure})", "",
               f"Settings: {settings.get('rows')} rows per world ({settings.get('split')}), "
               f"{settings.get('fit_rows')} calibration rows score the grid, seed {settings.get('seed')}; "
@@ -518,8 +475,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         settings = {"rows": n_rows, "split": split_text(diag_cfg, results[0]["folds"] if results else 1),
                     "fit_rows": diag_cfg.get("fit_rows") or "all", "seed": diag_cfg.get("seed", 0),
                     "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
-                    "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS),
-                    "specificity_decides": bool(diag_cfg.get("specificity_decides", False))}
+                    "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS)}
         md_path = out / "gap_benchmark.md"
         atomic_write_text(md_path, results_markdown(results, scores, FIGURE, settings) + "\n")
         atomic_write_text(out / "benchmark.json", json.dumps({"results": results, "scores": scores,

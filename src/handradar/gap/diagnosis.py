@@ -27,15 +27,10 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
    with the factor its physics acts through (its specificity: handradar.gap.specificity);
    ``cause`` (:func:`decide`; its numbers: report key ``evidence``) has three outcomes:
    the leading candidate when its CI excludes 0, its gap_closed is at least ``min_gap_closed``,
-   and the paired bootstrap of its lead over the runner-up excludes 0 (with ``specificity_decides``, a
-   leader whose gain is specific needs neither the threshold nor that lead over a runner-up whose gain
-   is not: :func:`decide`, ``evidence.decided_by``); "none" when the upper end
+   and the paired bootstrap of its lead over the runner-up excludes 0; "none" when the upper end
    of the leader's CI is below ``min_gap_closed`` (no candidate closes a relevant part of the gap);
    else "inconclusive", with an estimate of the recordings that would decide it
-   (``recordings_needed``, from the CI half-widths scaled by 1/sqrt(rows)). Next to it, as evidence
-   only (``evidence.speckle``, and ``speckle`` per candidate): the same candidates scored by the
-   speckle deviance (handradar.metrics.speckle_deviance), which treats the measured power as speckle
-   around the simulated expectation: its leader, gap_closed and lead over the runner-up;
+   (``recordings_needed``, from the CI half-widths scaled by 1/sqrt(rows));
 4. how far: greedy forward selection from the leader, refitting every remaining candidate on
    calibration given those chosen, while one still closes a significant part of the remaining gap;
    then each chosen effect is refitted given the others; ``after`` is the combined result on the
@@ -57,8 +52,8 @@ from one more fit of every step on all N rows; each fold's own are ``fold_params
 other folds of fold 0 and is scored on fold 0's rows only (``radarweightnet.evaluation_rows``).
 Report convention: ``n_evaluation`` = N; ``n_calibration`` = the fewest rows any fold's fits saw
 (N minus the largest fold). With folds = 1 nothing of this applies: the diagnosis is the single split
-above, number for number. The default, folds = "auto" (:func:`resolve_folds`), cross-fits in 3 folds
-below 60 rows (a user's folder of 36 recordings) and keeps the single split from there.
+above, number for number. The default, folds = "auto" (:func:`resolve_folds`), cross-fits at every
+size: in 3 folds below 60 rows (a user's folder of 36 recordings) and in 2 from there.
 
 No code here reads meta.json ``truth``: the rows come from a dataset file, which has none.
 
@@ -95,11 +90,9 @@ from handradar.gap.fit import (
     calibrate_settings,
     effect_grid,
     fit_baseline_effects,
-    floor_snr_offsets,
     generic_grid,
     grid_fit,
     in_vocabulary_order,
-    measured_floor_db,
     refine,
 )
 from handradar.gap.report import FACTORS, FORMAT, GENERIC_SETTINGS
@@ -119,7 +112,6 @@ from handradar.metrics import (
     gap_closed,
     per_example_mse,
     per_example_ssim,
-    speckle_deviance,
 )
 from handradar.sim.cache import SlotProfileCache, cache_slot_profiles
 from handradar.sim.effects import REGISTRY
@@ -145,15 +137,12 @@ class DiagnosisConfig:
     coherences: list[float] | None = None  # ... and each share of the bones' cross terms (None or [1.0]: not fitted)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
     noise_draws: int = 4  # a noise effect's draws averaged in power (0: its expectation in closed form)
-    noise_floor: bool = False  # a noise effect's level follows each row's measured floor (conf/diagnose.yaml)
     fit_rows: int | None = None  # calibration rows the grid search scores (stratified subset); None: all
     refine_steps: int = 0  # gradient steps after the grid for effects with fit == "grad" (0: grid only)
     refine_rows: int = 8  # calibration rows of each gradient step
     refine_lr: float = 0.05  # Adam step as a fraction of each parameter's range
     n_boot: int = 2000
     min_gap_closed: float = 0.02  # smallest gap_closed worth naming a cause / adding an effect (conf/diagnose.yaml)
-    specificity_decides: bool = False  # a specific leader is relevant at any size and ahead of an unspecific
-    # runner-up (handradar.gap.specificity; decide; conf/diagnose.yaml)
     greedy_max: int = 3  # most effects the forward selection adds
     batch_size: int = 8
     radarweightnet: bool = True
@@ -218,24 +207,18 @@ def rows_to_decide(n_eval: int, ci95: Sequence[float], margin: float) -> float |
 
 def decide(effect: str, gap_closed: float, ci95: Sequence[float], lead: float | None,
            lead_ci95: Sequence[float] | None, *, min_gap_closed: float, n_eval: int,
-           calibration_fraction: float, specific: bool = False, runner_up_specific: bool = False) -> dict:
+           calibration_fraction: float) -> dict:
     """The verdict on the leading candidate ``effect`` (gap_closed [ci95]; ``lead`` [lead_ci95]: its
     paired lead over the runner-up, None without one): ``cause`` = the effect, "none" or
     "inconclusive", and for "inconclusive" what must be shown (``decides``) and the rows that would
     show it, if the point estimates held (``evaluation_rows_needed``; ``recordings_needed`` =
-    calibration + evaluation at ``calibration_fraction``; None when no number of rows would).
-
-    ``specific``: the leader's gain is specific (larger where its physics acts; handradar.gap.specificity),
-    ``runner_up_specific`` the same of the runner-up's. The relevance threshold is there to keep generic
-    gains (a floor filling a sparse spectrogram) from being named; a specific gain is not generic, so it
-    is relevant at any size, and it separates the leader from a runner-up whose gain is not specific
-    when the lead's CI cannot. Both False (the default): the rule on gap_closed and the lead alone."""
+    calibration + evaluation at ``calibration_fraction``; None when no number of rows would)."""
     out: dict = {"cause": effect, "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
-    ahead = lead_ci95 is None or lead_ci95[0] > 0 or (specific and not runner_up_specific)
-    relevant = gap_closed >= min_gap_closed or specific
+    ahead = lead_ci95 is None or lead_ci95[0] > 0
+    relevant = gap_closed >= min_gap_closed
     if ci95[0] > 0 and relevant and ahead:
         return out
-    if ci95[1] < min_gap_closed and not (specific and ci95[0] > 0):
+    if ci95[1] < min_gap_closed:
         out["cause"] = "none"
         return out
     out["cause"] = "inconclusive"
@@ -275,9 +258,6 @@ class Candidate:
     signature: float = 0.0
     spectrograms: np.ndarray | None = None  # evaluation rows
     fold_params: list[dict[str, float]] = field(default_factory=list)  # with folds: each fold's fit (scores its rows)
-    deviance: np.ndarray | None = None  # step 1: speckle deviance per evaluation row (handradar.metrics)
-    speckle_gap_closed: float = 0.0  # ... its gap_closed against the base's deviance, with its CI
-    speckle_ci95: tuple[float, float] = (0.0, 0.0)
     specificity: dict | None = None  # does its gain come where its physics acts (handradar.gap.specificity)
 
     @property
@@ -292,9 +272,6 @@ class Candidate:
                "ssim": float(self.ssim.mean()), "mse": float(self.mse.mean()), "gap_closed": float(self.gap_closed),
                "ci95": [float(self.ci95[0]), float(self.ci95[1])], "significant": self.significant(min_gap_closed),
                "signature_correlation": float(self.signature), "fit": self.fit.as_dict()}
-        if self.deviance is not None:
-            out["speckle"] = {"deviance": float(self.deviance.mean()), "gap_closed": float(self.speckle_gap_closed),
-                              "ci95": [float(self.speckle_ci95[0]), float(self.speckle_ci95[1])]}
         if self.specificity is not None:
             out["specificity"] = self.specificity
         if self.fold_params:
@@ -306,8 +283,7 @@ class Candidate:
         them); gap_closed against ``before_ssim`` (all evaluation rows), no CI."""
         return dataclasses.replace(self, params=params, ssim=self.ssim[pos], mse=self.mse[pos],
                                    gap_closed=float(gap_closed(before_ssim[pos], self.ssim[pos])),
-                                   spectrograms=None, fold_params=[], deviance=None,
-                                   specificity=None)
+                                   spectrograms=None, fold_params=[], specificity=None)
 
 
 @dataclass
@@ -351,26 +327,27 @@ def _subset(labels: np.ndarray, idx: np.ndarray, n: int | None, seed: int) -> np
 
 
 AUTO = "auto"
-# folds = "auto" (the default): cross-fitting in AUTO_FOLDS folds below AUTO_CROSSFIT_BELOW_ROWS rows, one split
-# from there. Below it one split evaluates fewer than 30 rows, the fewest its warning asks for; from it the
-# split's half is enough, and cross-fitting, which fits every step k + 1 times, would take a 100-recording
-# diagnosis past its 5 minutes on 2 cores (335 s against 101 s, make bench). Set by those two, before any
-# verdict at these sizes; the gap benchmark judges both sides: 36 recordings cross-fitted, 240 on one split.
-AUTO_FOLDS = 3
-AUTO_CROSSFIT_BELOW_ROWS = 60
+# folds = "auto" (the default): cross-fitting at every size, in AUTO_FOLDS_SMALL folds below
+# AUTO_SMALL_BELOW_ROWS rows and AUTO_FOLDS from there. A false cause is the worst answer the diagnosis
+# gives, and cross-fitting is the one setting measured to remove them (docs/gap_validation.md); below 60
+# rows 3 folds let each fit see two thirds of the rows instead of half.
+AUTO_FOLDS = 2
+AUTO_FOLDS_SMALL = 3
+AUTO_SMALL_BELOW_ROWS = 60
 
 
 def resolve_folds(folds: int | str, labels: np.ndarray) -> int:
     """The folds a diagnosis of rows with class ``labels`` uses: ``folds`` itself, or for "auto"
-    AUTO_FOLDS (at most the smallest class's rows) below AUTO_CROSSFIT_BELOW_ROWS rows, else 1."""
+    AUTO_FOLDS_SMALL below AUTO_SMALL_BELOW_ROWS rows and AUTO_FOLDS from there, at most the smallest
+    class's rows (1, one split, where that is under 2)."""
     if folds != AUTO:
         if isinstance(folds, bool) or not isinstance(folds, int) or folds < 1:
             raise ValueError(f"diagnose.folds must be an integer >= 1 (1: one calibration/evaluation split) or "
                              f"'auto', found {folds!r}")
         return folds
     smallest = int(np.unique(labels, return_counts=True)[1].min()) if len(labels) else 0
-    k = min(AUTO_FOLDS, smallest)
-    return k if len(labels) < AUTO_CROSSFIT_BELOW_ROWS and k >= 2 else 1
+    k = min(AUTO_FOLDS_SMALL if len(labels) < AUTO_SMALL_BELOW_ROWS else AUTO_FOLDS, smallest)
+    return k if k >= 2 else 1
 
 
 def cross_folds(labels: np.ndarray, k: int, seed: int) -> list[np.ndarray]:
@@ -422,10 +399,6 @@ class _Runner:
         m = self.target[idx]
         s = torch.as_tensor(spec)
         return per_example_ssim(m, s), per_example_mse(m, s)
-
-    def deviance(self, spec: np.ndarray, idx: np.ndarray) -> np.ndarray:
-        """Speckle deviance of ``spec`` against the measured rows ``idx`` (handradar.metrics)."""
-        return speckle_deviance(self.target[idx], spec, self.data.chain.dynamic_range_db)
 
     def fit(self, engine: VariantEngine, names: Sequence[str], fit_idx: np.ndarray, refine_idx: np.ndarray,
             step: str) -> dict[str, GridFit]:
@@ -479,73 +452,32 @@ class _Runner:
         return base_spec, out
 
 
-def _speckle_evidence(runner: _Runner, base_spec: np.ndarray, cands: list[Candidate], ev: np.ndarray,
-                      cfg: DiagnosisConfig) -> tuple[np.ndarray, dict]:
-    """Step 1's candidates scored by the speckle deviance instead of SSIM (each candidate's deviance,
-    gap_closed and CI set in place): the baseline's deviance per row, and the evidence: leader, its
-    gap_closed [CI], the paired-bootstrap CI of its lead over the runner-up (no verdict is drawn from it)."""
-    before_deviance = runner.deviance(base_spec, ev)
-    for c in cands:  # the deviance as a score (1 - deviance), so that gap_closed and its bootstrap apply
-        c.deviance = runner.deviance(c.spectrograms, ev)
-        boot = bootstrap_gap_closed(1.0 - before_deviance, 1.0 - c.deviance, n_boot=cfg.n_boot, seed=cfg.seed)
-        c.speckle_gap_closed, c.speckle_ci95 = boot.estimate, boot.ci95
-    ranked = sorted(cands, key=lambda c: c.speckle_gap_closed, reverse=True)
-    out: dict = {"leader": None, "gap_closed": None, "ci95": None, "runner_up": None, "lead_ci95": None}
-    if not ranked:
-        return before_deviance, out
-    lead = ranked[0]
-    out.update(leader=lead.effect, gap_closed=float(lead.speckle_gap_closed),
-               ci95=[float(lead.speckle_ci95[0]), float(lead.speckle_ci95[1])])
-    if len(ranked) > 1:
-        _, ci = bootstrap_difference(1.0 - before_deviance, 1.0 - lead.deviance, 1.0 - ranked[1].deviance,
-                                     n_boot=cfg.n_boot, seed=cfg.seed)
-        out.update(runner_up=ranked[1].effect, lead_ci95=[float(ci[0]), float(ci[1])])
-    return before_deviance, out
-
-
 def _evidence(before: np.ndarray, cands: list[Candidate], cfg: DiagnosisConfig) -> tuple[str, dict]:
     """The cause and the rule that gives it, with its numbers (report key ``evidence``)."""
     ev: dict = {"rule": "cause = the leading candidate when its 95 % CI of gap_closed excludes 0, its gap_closed "
                         f">= {cfg.min_gap_closed}, and the paired-bootstrap 95 % CI of its lead over the runner-up "
                         f"excludes 0; none when the upper end of the leader's CI is below {cfg.min_gap_closed}; "
                         "otherwise inconclusive, with the recordings that would decide it (CI half-widths scaled "
-                        "by 1/sqrt(rows))"
-                        + ("; a leader whose gain is specific (its specificity CI above 0) is relevant at any "
-                           "gap_closed and counts as ahead of a runner-up whose gain is not specific"
-                           if cfg.specificity_decides else ""),
+                        "by 1/sqrt(rows))",
                 "leader": None, "runner_up": None, "leader_significant": False, "lead": None, "lead_ci95": None,
-                "clearly_ahead": False, "leader_specific": False, "runner_up_specific": False, "specific_lead": False,
-                "decided_by": None,
-                "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
+                "clearly_ahead": False, "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
     if not cands:
         return "none", ev
     lead = cands[0]
-    ev.update(leader=lead.effect, leader_significant=lead.significant(cfg.min_gap_closed),
-              leader_specific=lead.specific)
+    ev.update(leader=lead.effect, leader_significant=lead.significant(cfg.min_gap_closed))
     if len(cands) > 1:
         run = cands[1]
         diff, ci = bootstrap_difference(before, lead.ssim, run.ssim, n_boot=cfg.n_boot, seed=cfg.seed)
         ev.update(runner_up=run.effect, lead=float(diff), lead_ci95=[float(ci[0]), float(ci[1])],
-                  clearly_ahead=bool(ci[0] > 0), runner_up_specific=run.specific)
+                  clearly_ahead=bool(ci[0] > 0))
     else:
         ev["clearly_ahead"] = True
-
-    def verdict(with_specificity: bool) -> dict:
-        return decide(lead.effect, lead.gap_closed, lead.ci95, ev["lead"], ev["lead_ci95"],
-                      min_gap_closed=cfg.min_gap_closed, n_eval=len(before),
-                      # cross-fitted, every recording is an evaluation row: recordings = evaluation rows
-                      calibration_fraction=cfg.calibration_fraction if cfg.folds == 1 else 0.0,
-                      specific=lead.specific and with_specificity,
-                      runner_up_specific=ev["runner_up_specific"] and with_specificity)
-
-    plain, specific = verdict(False), verdict(True)
-    # what specificity_decides names that the rule on gap_closed and the lead alone does not (reported on or off)
-    ev["specific_lead"] = plain["cause"] != lead.effect and specific["cause"] == lead.effect
-    out = dict(specific if cfg.specificity_decides else plain)
+    out = decide(lead.effect, lead.gap_closed, lead.ci95, ev["lead"], ev["lead_ci95"],
+                 min_gap_closed=cfg.min_gap_closed, n_eval=len(before),
+                 # cross-fitted, every recording is an evaluation row: recordings = evaluation rows
+                 calibration_fraction=cfg.calibration_fraction if cfg.folds == 1 else 0.0)
     cause = out.pop("cause")
     ev.update(out)
-    if cause == lead.effect:
-        ev["decided_by"] = "lead" if plain["cause"] == cause else "specificity"
     return cause, ev
 
 
@@ -659,38 +591,17 @@ class _Steps:
         calibration["effect_grids"] = {k: f.as_dict() for k, f in fits.items()}
         fold.build, fold.base, fold.calibration = build, base, calibration
 
-    def noise_floor(self) -> dict | None:
-        """With ``noise_floor``: each row's measured noise floor (handradar.gap.fit.measured_floor_db,
-        read where the paper's noise-free baseline shows nothing, at the outer Doppler half's speeds),
-        which every noise effect of the diagnosis then follows through per-row SNR offsets
-        (RowSet.snr_offset_db); its summary for the report. A per-row reading of the measurement, not a
-        fit: the same in every fold."""
-        rows = self.data.rows
-        rows.snr_offset_db = None
-        if not self.cfg.noise_floor:
-            return None
-        quiet = {k: v for k, v in self.base.items() if k != "noise"}
-        spec = VariantEngine(self.build, quiet, rows, batch_size=self.cfg.batch_size).spectrograms([{}])[0]
-        levels, hidden = measured_floor_db(self.data.measured, spec, self.data.chain.dynamic_range_db)
-        rows.snr_offset_db = floor_snr_offsets(levels)
-        seen = levels[np.isfinite(levels) & ~hidden]
-        return {"rows_observed": int(len(seen)), "rows_below_floor": int(hidden.sum()),
-                "level_db_percentiles": [float(v) for v in np.percentile(seen, [10, 50, 90])] if len(seen) else []}
-
     def calibrate(self) -> None:
         """Step 0 (module doc) before any candidate is scored, in every fold: the generic settings, then the
         parameters of the baseline's own effects given it; the fitted values replace the defaults in the
         baseline. The reported baseline is the last fold's (the parameter fit)."""
         if "occlusion" in self.base:  # the baseline simulated below then needs visibility
             self.bone_features(self.base_sim)
-        floor = self.noise_floor()
         self.generic_grid = generic_grid({name: getattr(self.cfg, name) for name in GENERIC_SETTINGS})
         for fold in self.folds:
             self.calibrate_fold(fold)
         reported = self.folds[-1]
         self.build, self.base, self.calibration = reported.build, reported.base, dict(reported.calibration)
-        if floor is not None:
-            self.calibration["noise_floor"] = floor
         if len(self.folds) > 1:
             keys = [setting for setting, _, _ in GENERIC_SETTINGS.values()] + ["effects"]
             self.calibration["folds"] = [{k: f.calibration[k] for k in keys if k in f.calibration} for f in self.scored]
@@ -730,8 +641,6 @@ class _Steps:
         self.bones.add(torch.stack([powers[int(r)] for r in self.ev]), d.measured[self.ev] - self.base_spec,
                        self.base_spec)
         self.cause, self.evidence = _evidence(self.before_ssim, self.cands, cfg)
-        self.before_deviance, self.evidence["speckle"] = _speckle_evidence(self.runner, self.base_spec, self.cands,
-                                                                            self.ev, cfg)
 
     def how_far(self) -> None:
         """Greedy forward selection from the leader while a candidate still closes a significant part;
@@ -789,7 +698,6 @@ class _Steps:
         self.report = {"format": FORMAT, "n_calibration": int(min(len(f.train) for f in self.scored)),
                        "n_evaluation": int(len(ev)),
                        "baseline": {"ssim": float(self.before_ssim.mean()), "mse": float(self.before_mse.mean()),
-                                    "speckle_deviance": float(self.before_deviance.mean()),
                                     "effects": {k: self.base_sim.effect(k).values() for k in self.base},
                                     "calibration": self.calibration},
                        "where": where,
@@ -805,8 +713,7 @@ class _Steps:
                                     **{name: getattr(cfg, name) for name in GENERIC_SETTINGS
                                        if name != "rcs_exponents" and getattr(cfg, name) not in (None, [0.0])},
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
-                                    "min_gap_closed": cfg.min_gap_closed,
-                                    "specificity_decides": cfg.specificity_decides}}
+                                    "min_gap_closed": cfg.min_gap_closed}}
 
     def assess_specificity(self) -> None:
         """Each step-1 candidate's specificity evidence, where its physics names a factor (or pixels)."""

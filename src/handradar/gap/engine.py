@@ -35,8 +35,7 @@ track the same hands are batched together, so one-hand rows cost about half.
 
 Public API:
 
-    RowSet(skeletons (N, T, 2, 21, 3), masks (N, T, 2), times (T,), visibility (N, T, 2, 19) | None,
-           snr_offset_db (N,) | None)
+    RowSet(skeletons (N, T, 2, 21, 3), masks (N, T, 2), times (T,), visibility (N, T, 2, 19) | None)
         .take(idx) -> RowSet
     build: a handradar.sim.factory.SimFactory, build(effects {name: {param: value}}) -> Simulator
     VariantEngine(build, base, rows, batch_size=8)
@@ -70,7 +69,6 @@ class RowSet:
     masks: np.ndarray  # (N, T, 2)
     times: np.ndarray  # (T,)
     visibility: np.ndarray | None = None  # (N, T, 2, 19) visible fraction (occlusion), or None
-    snr_offset_db: np.ndarray | None = None  # (N,) dB added to a noise effect's snr_db per row (Noise), or None
 
     def __len__(self) -> int:
         return int(self.skeletons.shape[0])
@@ -78,8 +76,7 @@ class RowSet:
     def take(self, idx: np.ndarray) -> RowSet:
         idx = np.asarray(idx, dtype=np.int64)
         return RowSet(self.skeletons[idx], self.masks[idx], self.times,
-                      None if self.visibility is None else self.visibility[idx],
-                      None if self.snr_offset_db is None else self.snr_offset_db[idx])
+                      None if self.visibility is None else self.visibility[idx])
 
 
 def merge(base: Variant, added: Variant) -> dict[str, dict[str, float]]:
@@ -312,15 +309,6 @@ class VariantEngine:
         return (torch.as_tensor(r.skeletons[rows]), torch.as_tensor(r.masks[rows]),
                 torch.as_tensor(r.times, dtype=torch.float64), vis)
 
-    def _per_row(self, sims: Sequence[Simulator], rows: np.ndarray) -> None:
-        """The rows' per-example effect inputs, set on each simulator before it simulates them: a noise
-        effect's SNR offset (RowSet.snr_offset_db; None when the rows carry none)."""
-        off = self.rows.snr_offset_db
-        for sim in sims:
-            for e in sim.effects:
-                if e.name == "noise":
-                    e.snr_offset_db = None if off is None else torch.as_tensor(off[rows], dtype=torch.float64)
-
     def _path(self, sim: Simulator, added: Variant) -> str:
         stages = {REGISTRY[name].stage for name in added}
         by_settings = "signal" if sim is self.base_sim else settings_path(sim, self.base_sim)
@@ -393,7 +381,6 @@ class VariantEngine:
         for pos, rows in self._batches(idx):
             inputs = self._inputs(rows)
             base = self._base(inputs, rows)
-            self._per_row(sims, rows)
             if on_base is not None:
                 on_base(rows, base.profiles)
             store = _Appended()
@@ -417,5 +404,4 @@ class VariantEngine:
             inputs = self._inputs(rows)
             with torch.no_grad():
                 base = self._base(inputs, rows)
-            self._per_row([sim], rows)
             yield rows, sim.spectrogram(*self._signal(sim, added, path, inputs, base, None))

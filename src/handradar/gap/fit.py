@@ -14,12 +14,6 @@ their grids, then optional gradient steps.
     grid_fit(engine, candidates, idx, measured, grids=None) -> {effect: GridFit}
         one pass over the rows scores every grid point of every candidate (mean SSIM; a grid point
         whose spectrograms are not finite scores -inf)
-    measured_floor_db(measured, simulated, dynamic_range_db) -> ((N,) dB, (N,) bool below the floor)
-        each measured row's noise level over the display floor, from the mean of its pixels where the
-        noise-free simulation shows nothing, in the outer Doppler half (speckle statistics; a bound
-        where the noise is below the floor, NaN where no such pixel is left)
-    floor_snr_offsets(levels) -> (N,) dB
-        the per-row SNR offsets of a noise effect that follow those floors (0 where not observable)
     refine(engine, name, values, idx, measured, steps, lr) -> dict[str, float]
         Adam on the effect's parameters (step sizes a fraction ``lr`` of each parameter's range),
         projected into bounds after each step; used for effects with ``fit == "grad"``
@@ -33,7 +27,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
-from scipy import special
 
 from handradar.gap.engine import RowSet, VariantEngine, merge
 from handradar.gap.report import GENERIC_SETTINGS
@@ -163,49 +156,6 @@ def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, 
         j = int(np.argmax(f.scores))
         f.best, f.best_score = dict(f.grid[j]), f.scores[j]
     return fits
-
-
-def measured_floor_db(measured: np.ndarray, simulated: np.ndarray,
-                      dynamic_range_db: float) -> tuple[np.ndarray, np.ndarray]:
-    """Each measured row's noise level in dB relative to the display floor (unit value 0), (N,), and
-    which rows show no noise above the floor (N,) bool.
-
-    Read where the noise-free simulation of the row (``simulated``, same shape (N, doppler, columns),
-    zero Doppler at row doppler // 2) sits at the floor, i.e. away from every modelled return, and only
-    in the outer half of the Doppler axis (|v| at least v_max / 2): receiver noise is white over Doppler,
-    while the faint returns a simulator lacks (other scatterers of a moving hand) crowd the slow speeds
-    and would read as noise. Receiver noise is speckle, exponential in power: with mean power m times
-    the floor F, a pixel shows u = max(0, 10 log10(X / F)) / range, and E[range u] = (10 / ln 10)
-    E1(1 / m) (E1 the exponential integral), increasing in m; the level is 10 log10 m at which that
-    equals the mean of those pixels. Where none of the row's n such pixels is above the floor the noise
-    is below it, and the level is its bound there, 10 log10(1 / ln n) (one pixel above the floor
-    expected), so such rows keep their noise hidden; NaN where no such pixel is left: unknown."""
-    n_doppler = simulated.shape[1]
-    outer = np.abs(np.arange(n_doppler) - n_doppler // 2) >= n_doppler // 4
-    floor = (simulated <= 0.0) & outer[None, :, None]
-    n = floor.sum(axis=(1, 2))
-    shown = np.where(floor, measured, 0.0).sum(axis=(1, 2)) * dynamic_range_db / np.maximum(n, 1)  # mean dB above F
-    level = np.interp(shown, _SPECKLE_MEAN_DB, _SPECKLE_LEVEL_DB)
-    # P(X > F) = exp(-1 / m), so n exp(-1 / m) = 1; n >= 3 keeps the bound below the floor (ln n > 1)
-    bound = -10.0 * np.log10(np.log(np.maximum(n, 3)))
-    hidden = (n > 0) & (shown <= _SPECKLE_MEAN_DB[0])
-    level = np.where(hidden, bound, np.maximum(level, bound))
-    return np.where(n > 0, level, np.nan), hidden
-
-
-# E[max(0, 10 log10 X)] for exponential X of mean 10^(L / 10), tabulated over the level L (dB): increasing
-_SPECKLE_LEVEL_DB = np.linspace(-40.0, 60.0, 10001)
-_SPECKLE_MEAN_DB = 10.0 / np.log(10.0) * special.exp1(10.0 ** (-_SPECKLE_LEVEL_DB / 10.0))
-
-
-def floor_snr_offsets(levels: np.ndarray) -> np.ndarray:
-    """Per-row SNR offsets (dB) for a noise effect whose level follows each row's measured floor:
-    minus the row's level over the median of the observable ones (a floor 3 dB higher: 3 dB less SNR),
-    so ``snr_db`` stays the level of the median row; 0 where the level is not observable (NaN)."""
-    ok = np.isfinite(levels)
-    if not ok.any():
-        return np.zeros(len(levels))
-    return np.where(ok, np.median(levels[ok]) - levels, 0.0)
 
 
 def refine(engine: VariantEngine, name: str, values: dict[str, float], idx: np.ndarray, measured: np.ndarray, *,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 
 from handradar.runs.tables import fmt_number
@@ -42,12 +41,6 @@ def _calibration(cal: dict | None) -> str:
     if cal.get("effects"):
         text += ("; the baseline's own effects fitted there on their grids: "
                  + "; ".join(f"{k} {_params(v)}" for k, v in cal["effects"].items()))
-    floor = cal.get("noise_floor")
-    if floor:
-        pct = floor["level_db_percentiles"]
-        spread = f" (10/50/90 %: {', '.join(f'{v:+.1f}' for v in pct)} dB over the display floor)" if pct else ""
-        text += (f"; a noise effect follows each row's measured floor, observable in {floor['rows_observed']} "
-                 f"rows{spread}, below the display floor in {floor.get('rows_below_floor', 0)}")
     return text
 
 
@@ -78,108 +71,73 @@ def _cause(cause: str, ev: dict) -> str:
             f"CI half-widths scaled by 1/sqrt(rows), if the estimates held) would show {ev['decides']}.")
 
 
+def _ci(ci: list[float]) -> str:
+    return f"[{fmt_number(ci[0], signed=True)}, {fmt_number(ci[1], signed=True)}]"
+
+
 def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = "") -> str:
-    """Markdown of a (validated) report; ``figures`` by name as written by handradar.viz.gap."""
+    """Markdown of a (validated) report, in the order a user acts on it: the verdict and its evidence, the
+    fitted simulator and how far it closes the gap, where the residual lies, the candidates table.
+    ``figures`` by name as written by handradar.viz.gap."""
     rel = {k: Path(v).relative_to(out_dir).as_posix() if Path(v).is_relative_to(out_dir) else str(v)
            for k, v in figures.items()}
     base, after, ev = report["baseline"], report["after"], report.get("evidence", {})
-    lines = ["# Sim-to-real gap report", ""]
-    if source:
-        lines += [f"Data: `{source}`", ""]
+    lines = ["# Sim-to-real gap report", ""] + ([f"Data: `{source}`", ""] if source else [])
+    lines += ["## Verdict", "", _cause(report["cause"], ev), _rows(report)]
+    if ev.get("leader"):
+        lead = (f"its lead over {ev['runner_up']} {fmt_number(ev['lead'], signed=True)} {_ci(ev['lead_ci95'])}"
+                if ev.get("runner_up") else "no runner-up")
+        top = report["candidates"][0]
+        lines.append(f"- Evidence: leader {ev['leader']} closes {fmt_number(top['gap_closed'], signed=True)} "
+                     f"{_ci(top['ci95'])} of the gap; {lead}")
+    lines += [f"- Rule: {ev['rule']}" if ev.get("rule") else "", ""]
     effects = ", ".join(base.get("effects", {})) or "none (the paper's model)"
-    lines += [f"- Baseline simulator effects: {effects}", _rows(report),
-              f"- Baseline: SSIM {fmt_number(base['ssim'])}, MSE {fmt_number(base['mse'], 5)}, gap = 1 - SSIM = {fmt_number(1 - base['ssim'])}"
-              + _calibration(base.get("calibration")),
-              _cause(report["cause"], ev),
-              f"- After adding {', '.join(after['effects']) or 'nothing'}: SSIM {fmt_number(after['ssim'])}, "
-              f"gap closed {fmt_number(after['gap_closed'], signed=True)}", ""]
-    lines += ["## Where", "",
-              "Signed mean residual (measured - simulated, spectrogram units): positive where the measurement has "
-              "energy the simulator misses.", ""]
-    if "residual" in rel:
-        lines += [f"![residual]({rel['residual']})", ""]
-    if "factors" in rel:
-        lines += [f"![factors]({rel['factors']})", ""]
-    by = report["where"]["by_factor"]
-    for factor, levels in by.items():
+    lines += ["## The fitted simulator and how far it closes the gap", "",
+              f"- Baseline (effects: {effects}): SSIM {fmt_number(base['ssim'])}, gap = 1 - SSIM = "
+              f"{fmt_number(1 - base['ssim'])}" + _calibration(base.get("calibration")),
+              f"- Adding {', '.join(f'{k} ({_params(v)})' for k, v in after['params'].items()) or 'nothing'}: "
+              f"SSIM {fmt_number(after['ssim'])}, gap closed {fmt_number(after['gap_closed'], signed=True)} "
+              "(greedy forward selection, each chosen effect refitted given the others; `fitted_sim.yaml`)"]
+    steps = [s for s in report.get("selection", []) if s["candidates"]]
+    if len(steps) > 1:
+        lines.append("- Selection: " + "; ".join(
+            f"step {s['step']} leader {s['candidates'][0]['effect']} "
+            f"{fmt_number(s['candidates'][0]['gap_closed_of_remaining'], signed=True)} of the remaining gap"
+            for s in steps))
+    rwn = report.get("radarweightnet")
+    if rwn:
+        on = (f", scored on the {rwn['evaluation_rows']} held-out rows of fold 0" if "evaluation_rows" in rwn else "")
+        lines.append(f"- RadarWeightNet readout ({rwn['train_rows']} training rows{on}): gap closed "
+                     f"{fmt_number(rwn['gap_closed'], signed=True)} {_ci(rwn['ci95'])}")
+    lines.append("")
+    if "examples" in rel:
+        lines += [f"![examples]({rel['examples']})", ""]
+    lines += ["## Where the residual lies", "",
+              "Signed mean residual (measured - simulated): positive where the measurement has energy the simulator "
+              "misses.", ""]
+    lines += [f"![{k}]({rel[k]})\n" for k in ("residual", "factors") if k in rel]
+    for factor, levels in report["where"]["by_factor"].items():
         if levels:
             worst = min(levels, key=lambda k: levels[k]["ssim"])
             lines.append(f"- {factor}: lowest SSIM at {worst} ({fmt_number(levels[worst]['ssim'])}, n={levels[worst]['n']})")
     rp = report["where"]["reflection_points"]
     if rp:
-        top = sorted(rp.items(), key=lambda kv: -abs(kv[1]))[:5]
-        lines += ["", "Reflection points (share-weighted mean residual over the pixels each bone's simulated "
-                      "power shows in; + missing energy, - excess), largest first: "
-                  + ", ".join(f"{k} {fmt_number(v, signed=True)}" for k, v in top), ""]
-        if "bones" in rel:
-            lines += [f"![bones]({rel['bones']})", ""]
-    lines += ["## Which", "",
-              "| effect | fitted parameters | SSIM | gap_closed | 95 % CI | significant | signature r "
-              "| where its physics acts: gain high - low [95 % CI] |",
-              "|---|---|---|---|---|---|---|---|"]
+        top5 = sorted(rp.items(), key=lambda kv: -abs(kv[1]))[:5]
+        lines.append("- Reflection points (+ missing energy, - excess), largest first: "
+                     + ", ".join(f"{k} {fmt_number(v, signed=True)}" for k, v in top5))
+    lines += [""] + ([f"![bones]({rel['bones']})", ""] if "bones" in rel else [])
+    lines += ["## Candidates", "",
+              "| effect | fitted parameters | SSIM | gap_closed [95 % CI] | significant | signature r "
+              "| gain where its physics acts [95 % CI] |",
+              "|---|---|---|---|---|---|---|"]
     for c in report["candidates"]:
         sp = c.get("specificity")
-        spec = "-" if not sp else (f"{fmt_number(sp['contrast'], signed=True)} [{fmt_number(sp['ci95'][0], signed=True)}, "
-                                   f"{fmt_number(sp['ci95'][1], signed=True)}] ({sp['factor']})")
-        lines.append(f"| {c['effect']} | {_params(c['params'])} | {fmt_number(c['ssim'])} | {fmt_number(c['gap_closed'], signed=True)} | "
-                     f"[{fmt_number(c['ci95'][0], signed=True)}, {fmt_number(c['ci95'][1], signed=True)}] | "
+        spec = "-" if not sp else f"{fmt_number(sp['contrast'], signed=True)} {_ci(sp['ci95'])} ({sp['factor']})"
+        lines.append(f"| {c['effect']} | {_params(c['params'])} | {fmt_number(c['ssim'])} | "
+                     f"{fmt_number(c['gap_closed'], signed=True)} {_ci(c['ci95'])} | "
                      f"{'yes' if c.get('significant') else 'no'} | {fmt_number(c.get('signature_correlation'), 2, True)} | {spec} |")
-    lines += ["", "The last column is specificity evidence (handradar.gap.specificity; part of the rule only with "
-                  "diagnose.specificity_decides): "
-                  "an effect's mean per-row gain where the factor its physics acts through is high minus where it "
-                  "is low, factors from the skeletons (noise: within each row, the squared-residual reduction far "
-                  "from every simulated return minus next to them). Near 0 or below, the candidate closes a generic "
-                  "gap.", ""]
-    if ev:
-        lines += [f"Rule: {ev.get('rule', '')}.", ""]
-        if ev.get("leader"):
-            lead = (f"lead over {ev['runner_up']} {fmt_number(ev['lead'], signed=True)} "
-                    f"[{fmt_number(ev['lead_ci95'][0], signed=True)}, {fmt_number(ev['lead_ci95'][1], signed=True)}]"
-                    if ev.get("runner_up") else "no runner-up")
-            lines += [f"Evidence: leader {ev['leader']} (significant: {'yes' if ev['leader_significant'] else 'no'}), "
-                      f"{lead} (clearly ahead: {'yes' if ev['clearly_ahead'] else 'no'}); leader's gain specific: "
-                      f"{'yes' if ev.get('leader_specific') else 'no'}, runner-up's: "
-                      f"{'yes' if ev.get('runner_up_specific') else 'no'}"
-                      + (" (named by specificity)" if ev.get("decided_by") == "specificity" else "") + ".", ""]
-        sp = ev.get("speckle") or {}
-        if sp.get("leader"):
-            sg = functools.partial(fmt_number, signed=True)
-            lead = (f", its lead over {sp['runner_up']} [{sg(sp['lead_ci95'][0])}, {sg(sp['lead_ci95'][1])}]"
-                    if sp.get("runner_up") else "")
-            lines += [f"Speckle deviance (evidence only, handradar.metrics.speckle_deviance: the measured power as "
-                      f"speckle around the simulated expectation; baseline {fmt_number(base['speckle_deviance'])}): "
-                      f"leader {sp['leader']}, gap_closed {sg(sp['gap_closed'])} [{sg(sp['ci95'][0])}, "
-                      f"{sg(sp['ci95'][1])}]{lead}. On the benchmark worlds it favours any candidate that adds "
-                      "power where the simulation shows none (docs/gap_diagnosis.md, \"Speckle deviance\"): read it beside 1 - SSIM, "
-                      "not instead of it.", ""]
-    for key in ("candidates", "signatures"):
-        if key in rel:
-            lines += [f"![{key}]({rel[key]})", ""]
-    lines += ["## How far", "", "Greedy forward selection (each step refits every remaining candidate on "
-              "calibration given those chosen; gap_closed of the remaining gap; then each chosen effect is "
-              "refitted given the others):", ""]
-    for step in report.get("selection", []):
-        items = ", ".join(f"{c['effect']} {fmt_number(c['gap_closed_of_remaining'], signed=True)}" for c in step["candidates"])
-        if not step["candidates"] and step.get("params"):
-            items = "; ".join(f"{k} {v}" for k, v in step["params"].items())
-        lines.append(f"- step {step['step']} (base: {', '.join(step['base']) or 'baseline'}): {items or '-'}")
-    lines += ["", f"After: effects {after['effects'] or '[]'}, SSIM {fmt_number(after['ssim'])}, MSE {fmt_number(after['mse'], 5)}, "
-              f"gap closed {fmt_number(after['gap_closed'], signed=True)}.", ""]
-    rwn = report.get("radarweightnet")
-    if rwn:
-        corr = ", ".join(f"{k} {fmt_number(v, 2, True)}" for k, v in rwn.get("weight_correlation", {}).items() if v is not None)
-        lines += ["## RadarWeightNet readout", "",
-                  f"Trained {rwn['epochs']} epochs on {rwn['train_rows']} calibration rows (SSIM loss, cached slot "
-                  f"profiles)" + (f", scored on the {rwn['evaluation_rows']} held-out rows of fold 0 (not cross-fitted)"
-                                  if "evaluation_rows" in rwn else "")
-                  + f": SSIM {fmt_number(rwn['ssim'])}, gap closed {fmt_number(rwn['gap_closed'], signed=True)} "
-                  f"[{fmt_number(rwn['ci95'][0], signed=True)}, {fmt_number(rwn['ci95'][1], signed=True)}]."]
-        if rwn.get("best_effect"):
-            lines.append(f"Against the best physical effect ({rwn['best_effect']}, {fmt_number(rwn['best_effect_gap_closed'], signed=True)}): "
-                         f"difference {fmt_number(rwn['minus_best_effect'], signed=True)} "
-                         f"[{fmt_number(rwn['minus_best_effect_ci95'][0], signed=True)}, {fmt_number(rwn['minus_best_effect_ci95'][1], signed=True)}].")
-        lines += [f"Learned per-bone log weights vs each effect's per-bone log amplitude change (Pearson r): "
-                  f"{corr or 'no effect changes bone amplitudes'}; most correlated: {rwn.get('most_correlated') or '-'}.", ""]
-    if "examples" in rel:
-        lines += ["## Examples", "", f"![examples]({rel['examples']})", ""]
+    lines += ["", "Signature r: the correlation of the change a candidate makes with the baseline residual. The last "
+                  "column: the candidate's mean per-row gain where the factor its physics acts through is high minus "
+                  "where it is low (near 0 or below: it closes a generic gap).", ""]
+    lines += [f"![{k}]({rel[k]})\n" for k in ("candidates", "signatures") if k in rel]
     return "\n".join(lines)

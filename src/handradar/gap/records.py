@@ -11,6 +11,7 @@ Public API:
     benchmark_record(results, scores, settings, *, world, size, world_version, machine, command) -> dict
     record_name(record) -> str                 (``<world>_<size>.json``)
     validate_record(record, where) -> dict     (FormatError naming ``where`` and the missing key)
+    found(case) -> bool; wrong_cause(case) -> bool   (how a case's answer is judged)
     load_records(folder) -> list[dict]         (every *.json, validated, in table order)
     summary_markdown(records, source) -> str   (the summary table, its legend once, the provenance)
 """
@@ -23,15 +24,40 @@ from pathlib import Path
 from typing import Any
 
 from handradar.errors import FormatError
+from handradar.gap.report import VERDICTS
 from handradar.provenance import commit_of
 from handradar.runs.tables import fmt_number
 
 FORMAT = "handradar.gap_benchmark/1"
 WORLD_ORDER = ("default", "heldout", "heldout2", "heldout3")  # the tuning world first, then the test side
-SCORE_KEYS = ("effects_correct", "effects_total", "controls_correct", "controls_total", "effects_inconclusive",
-              "controls_inconclusive", "mean_true_gap_closed", "mean_after_gap_closed")
-CASE_KEYS = ("case", "truth", "cause", "correct", "decided_by", "recordings_needed", "true_gap_closed", "true_ci95",
-             "true_rank", "top_candidate", "top_gap_closed")
+SCORE_KEYS = ("effects_correct", "effects_found", "wrong_causes", "effects_total", "controls_correct",
+              "controls_total", "effects_inconclusive", "controls_inconclusive", "mean_true_gap_closed",
+              "mean_after_gap_closed")
+CASE_KEYS = ("case", "truth", "cause", "correct", "recordings_needed", "true_gap_closed", "true_ci95",
+             "true_rank", "top_candidate", "top_gap_closed", "after_effects")
+# Effects no candidate scored row by row can earn (the world's palm return is an interference pattern that
+# 0.5 mm of geometry redraws): judged "must not mislead" (docs/gap_validation.md#how-a-case-is-judged)
+MUST_NOT_MISLEAD = frozenset({"palm"})
+
+
+def found(case: Mapping) -> bool:
+    """The case's answer counts as found: the true effect named, or leading an "inconclusive" verdict; for an
+    effect in MUST_NOT_MISLEAD also "none", or "inconclusive" with no other effect kept by the greedy
+    selection (a record without ``after_effects`` cannot show that). A control is found when it says "none"."""
+    truth, cause = case["truth"], case["cause"]
+    if truth == "none":
+        return cause == "none"
+    if cause == truth or (cause == "inconclusive" and case.get("top_candidate") == truth):
+        return True
+    if truth not in MUST_NOT_MISLEAD or cause not in VERDICTS:
+        return False
+    kept = case.get("after_effects")
+    return cause == "none" or (kept is not None and all(e == truth for e in kept))
+
+
+def wrong_cause(case: Mapping) -> bool:
+    """The worst answer: an effect named that is not the withheld one (any effect, for a control)."""
+    return case["cause"] not in VERDICTS and case["cause"] != case["truth"]
 REQUIRED = ("format", "world", "size", "world_version", "command", "commit", "seeds", "machine", "scores", "cases")
 
 
@@ -43,7 +69,7 @@ def benchmark_record(results: Sequence[Mapping], scores: Mapping, settings: Mapp
             "world_version": world_version, "command": command, "commit": commit_of(str(settings.get("code_version", ""))),
             "seeds": [int(settings.get("seed", 0))], "machine": machine, "threads": settings.get("threads"),
             "wall_min": round(float(settings.get("minutes", 0.0)), 1), "rows": settings.get("rows"),
-            "split": settings.get("split"), "specificity_decides": bool(settings.get("specificity_decides", False)),
+            "split": settings.get("split"),
             "scores": {k: scores.get(k) for k in SCORE_KEYS},
             "cases": [{k: r.get(k) for k in CASE_KEYS} for r in results]}
 
@@ -89,23 +115,25 @@ def _cause(case: Mapping) -> str:
     cause = str(case["cause"])
     if cause == "inconclusive" and case.get("recordings_needed") is not None:
         cause += f" ~{case['recordings_needed']}"
-    return cause + (" (spec.)" if case.get("decided_by") == "specificity" else "")
+    return cause
 
 
 def case_cell(case: Mapping) -> str:
-    """``✓`` or ``✗ <what was named>``, with the true effect's gap_closed where it has one."""
-    mark = "✓" if case["correct"] else f"✗ {_cause(case)}"
+    """``✓`` (named), ``(✓) <verdict>`` (found, undecided) or ``✗ <what was said>``, with the true effect's
+    gap_closed where it has one."""
+    mark = "✓" if case["correct"] else f"(✓) {_cause(case)}" if found(case) else f"✗ {_cause(case)}"
     g = case.get("true_gap_closed")
     return mark if g is None else f"{mark} ({fmt_number(g, signed=True)})"
 
 
 LEGEND = ("Each column is one benchmark run: for every case, a reference world with one effect on (the other "
           "vocabulary effects off) diagnosed by the paper's simulator without it; `nothing` and `iq_imbalance` are "
-          "controls whose right answer is `none`. A cell is ✓ when the diagnosis names the withheld effect (a control: "
-          "`none`), else ✗ and what it named (`inconclusive ~N`: no verdict, about N recordings estimated to decide "
-          "it; `(spec.)`: named by `diagnose.specificity_decides`); in brackets the gap_closed of the true effect's "
-          "candidate. `default` is the world the settings were chosen on; `heldout*` judge them. Sizes: recordings "
-          "per case (240: one calibration/evaluation split; 36: cross-fitted in 3 folds).")
+          "controls whose right answer is `none`. ✓: the diagnosis names the withheld effect (a control: `none`); "
+          "(✓): found but undecided, the true effect leading an `inconclusive` verdict (palm: also `none`, or no "
+          "other effect kept); ✗: anything else, with what it said (`inconclusive ~N`: about N recordings estimated "
+          "to decide it). In brackets the gap_closed of the true effect's candidate. `default` is the world the "
+          "settings were chosen on; the others judge them. Sizes: recordings per case; how each run split its rows "
+          "is under Provenance.")
 
 
 def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benchmark") -> str:
@@ -129,7 +157,10 @@ def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benc
         lines.append(f"| {name} ({truth}) | " + " | ".join(cells) + " |")
     s = [r["scores"] for r in records]
     lines.append("| **effects named** | " + " | ".join(f"**{x['effects_correct']} of {x['effects_total']}**" for x in s) + " |")
+    lines.append("| **effects found** | " + " | ".join(
+        f"{sum(found(c) for c in r['cases'] if c['truth'] != 'none')} of {x['effects_total']}" for r, x in zip(records, s)) + " |")
     lines.append("| **controls none** | " + " | ".join(f"**{x['controls_correct']} of {x['controls_total']}**" for x in s) + " |")
+    lines.append("| **wrong causes** | " + " | ".join(f"**{sum(wrong_cause(c) for c in r['cases'])}**" for r in records) + " |")
     lines.append("| mean gap_closed, true effect | " + " | ".join(fmt_number(x.get("mean_true_gap_closed"), signed=True)
                                                           for x in s) + " |")
     lines.append("| world version | " + " | ".join(r["world_version"] for r in records) + " |")
@@ -138,7 +169,8 @@ def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benc
     for h, r in zip(heads, records):
         seeds = ", ".join(map(str, r["seeds"]))
         wall = "" if r.get("wall_min") is None else f", {r['wall_min']} min on {r.get('threads') or '?'} thread(s)"
-        lines.append(f"- **{h}**: `{r['command']}` at `{r['commit']}` ({r['world_version']}), seed {seeds}, "
+        split = f", {r['split']}" if r.get("split") else ""
+        lines.append(f"- **{h}**: `{r['command']}` at `{r['commit']}` ({r['world_version']}), seed {seeds}{split}, "
                      f"{r['machine']}{wall}." + (f" {r['note']}" if r.get("note") else ""))
     variants = [(h, v) for h, r in zip(heads, records) for v in r.get("variants") or []]
     if variants:

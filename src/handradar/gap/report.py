@@ -109,12 +109,6 @@ def validate_report(report: dict, *, n_doppler: int = 64, n_columns: int = 32) -
         if needed is not None and (not isinstance(needed, int) or isinstance(needed, bool) or needed < 1):
             raise ReportError(f"evidence.recordings_needed of an inconclusive cause must be a positive integer "
                               f"or null, found {needed!r}")
-    ev = report.get("evidence") if isinstance(report.get("evidence"), dict) else {}
-    if ev.get("decided_by") == "specificity":  # such a cause rests on its candidate's specificity evidence
-        sp = next((c.get("specificity") for c in cands if c["effect"] == cause), None)
-        if not (sp and sp.get("specific")):
-            raise ReportError(f"cause {cause!r} is decided by specificity, but its candidate's specificity is "
-                              f"not specific: {sp!r}")
     after = report.get("after")
     _scores(after, "after")
     _number(after, "gap_closed", "after")

@@ -28,9 +28,8 @@ candidate needs), never from meta.json, so that recordings from any source have 
                                                     mean over rows with a bootstrap 95 % CI
     pixel_specificity(effect, measured, before, after, n_boot, seed) -> dict | None   (the same report key)
 
-Reported next to gap_closed. It enters ``cause`` only with ``diagnose.specificity_decides``: a leader
-whose gain is specific is relevant at any size and ahead of a runner-up whose gain is not
-(handradar.gap.diagnosis.decide).
+Evidence reported next to gap_closed; it does not enter ``cause`` (letting it decide was tried and not
+adopted: docs/gap_validation.md#tried-and-not-adopted).
 """
 
 from __future__ import annotations

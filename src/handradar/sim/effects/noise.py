@@ -16,10 +16,6 @@ gap diagnosis compares with it (a measured speckle pattern is never reproduced p
 single draw costs SSIM even at the right level); synthetic training data keep one draw
 (draws = 1), like a measurement.
 
-``snr_offset_db`` (B,), None by default, adds a per-example offset to ``snr_db``: the gap diagnosis
-sets it from each measured row's own noise floor (``diagnose.noise_floor``), so that one fitted
-``snr_db`` serves rows whose measured floor differs; a simulator used alone leaves it None.
-
 Unit noise is drawn once per generator state: simulators whose generators stand at the same state
 (the variants of one gap-diagnosis pass, all seeded alike for common random numbers) reuse the same
 range-binned draw instead of drawing every ADC sample again (:func:`unit_noise`). The draw is then
@@ -81,7 +77,6 @@ class Noise(Effect):
         if int(draws) < 0:
             raise ValueError(f"noise: draws must be >= 0 (0: the expectation in closed form), found {draws}")
         self.draws = int(draws)
-        self.snr_offset_db: torch.Tensor | None = None  # (B,) dB added to snr_db per example (module doc)
         self.reset_rng()
 
     def settings(self) -> dict[str, int]:
@@ -92,7 +87,7 @@ class Noise(Effect):
 
     def noise_power(self, signal: torch.Tensor, power_scale: torch.Tensor | None = None) -> torch.Tensor:
         """(B, 1, 1, 1, 1): the noise power per range bin and chirp, P_signal / 10^(snr / 10), snr =
-        snr_db (+ ``snr_offset_db`` of each example, if set). P_signal is the summed signal's mean power
+        snr_db. P_signal is the summed signal's mean power
         after clutter removal, times ``power_scale`` (B,) if given: the SNR is relative to the power the
         chain shows (Simulator coherence)."""
         dyn = signal - signal.mean(dim=(-4, -3), keepdim=True)
@@ -100,11 +95,6 @@ class Noise(Effect):
         if power_scale is not None:
             p_sig = p_sig * power_scale.detach().to(p_sig.dtype).reshape(-1, 1, 1, 1, 1)
         snr = self.value("snr_db").to(p_sig.dtype)
-        if self.snr_offset_db is not None:
-            if self.snr_offset_db.shape != (signal.shape[0],):
-                raise ValueError(f"noise: snr_offset_db has shape {tuple(self.snr_offset_db.shape)}, expected "
-                                 f"({signal.shape[0]},), one per example")
-            snr = snr + self.snr_offset_db.to(p_sig.dtype).reshape(-1, 1, 1, 1, 1)
         return p_sig / 10.0 ** (snr / 10.0)
 
     def expected_power(self, signal: torch.Tensor, radar, chain, power_scale: torch.Tensor | None = None
