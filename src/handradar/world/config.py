@@ -205,10 +205,32 @@ class Kinematics:
     drift_m: float = 0.0015  # slow postural drift over the capture
 
 
+SCATTERING = ("surfaces", "bone_points")  # how the scene's direct returns are built (Scene.scattering)
+
+
+@dataclass(frozen=True)
+class BonePoints:
+    """Discrete scatterers of ``scene.scattering: bone_points`` (handradar.world.points, which states
+    the law): a grid of points ``spacing_m`` apart over every part, each with the monostatic RCS
+
+        sigma_i = g_i dA_i (rcs_per_area cos(theta_i)^exponent + isotropic)   (m^2, theta_i < 90 deg),
+
+    dA_i the area (m^2) the point stands for, g_i ~ Exponential(1) drawn once per recording."""
+
+    spacing_m: float = 0.008  # about two wavelengths at 77 GHz
+    rcs_per_area: float = 1.0  # m^2 per m^2 of skin, lobe peak (normal incidence)
+    exponent: float = 2.0  # q of the cos(theta)^q lobe
+    isotropic: float = 0.05  # m^2 per m^2, the same in every direction of the front half-space
+
+
 @dataclass(frozen=True)
 class Scene:
-    """Surface tessellation, skin reflectivity and the ADC scale."""
+    """Surface tessellation, skin reflectivity and the ADC scale; ``scattering`` picks how the direct
+    returns are built: ``surfaces`` (physical optics and skin texture, handradar.world.scene) or
+    ``bone_points`` (discrete scatterers with an RCS law of their own, handradar.world.points)."""
 
+    scattering: str = "surfaces"
+    points: BonePoints = field(default_factory=BonePoints)
     rate_hz: float = 100.0  # skeleton rate of the scene; motion is then interpolated to chirp times
     visibility_rate_hz: float = 50.0  # ray casting rate; visibility is interpolated linearly in between
     finger_sides: int = 6
@@ -239,10 +261,19 @@ class Scene:
 
 @dataclass(frozen=True)
 class LeapSensor:
+    """The Leap's clock and, whatever the effects, its floor of position noise.
+
+    jitter_floor_m: white 3-D rms position noise on every tracked joint, in every frame, independent
+    of the ``tracking_jitter`` effect (the gap benchmark switches effects off; a real Leap never is
+    noiseless). 0 leaves the stream as before the setting existed; ``world=scatterers`` uses 0.4 mm,
+    the Leap Motion's static precision (standard deviation below 0.5 mm: Guna et al., Sensors 14(2):3702,
+    2014; below 0.2 mm deviation: Weichert et al., Sensors 13(5):6380, 2013)."""
+
     rate_hz: float = 115.0
     timestamp_jitter_us: float = 150.0
     lead_s: float = 0.15  # Leap data start this long before the radar capture and end as long after
     radar_start_us: tuple[float, float] = (8.0e5, 2.5e6)  # nominal radar start on the Leap clock
+    jitter_floor_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -266,6 +297,10 @@ class WorldConfig:
             raise ValueError(f"world.gestures: unknown gesture(s) {bad}; expected some of {GESTURES}")
         if self.subjects < 1 or self.repetitions < 1 or not self.angles_deg:
             raise ValueError("world.subjects and world.repetitions must be >= 1 and world.angles_deg non-empty")
+        if self.scene.scattering not in SCATTERING:
+            raise ValueError(f"world.scene.scattering must be one of {SCATTERING}, found {self.scene.scattering!r}")
+        if self.leap.jitter_floor_m < 0 or self.scene.points.spacing_m <= 0:
+            raise ValueError("world.leap.jitter_floor_m must be >= 0 and world.scene.points.spacing_m > 0")
         if self.effects.iq_imbalance.stage not in ("slow_time", "adc"):
             raise ValueError(f"world.effects.iq_imbalance.stage must be 'slow_time' or 'adc', "
                              f"found {self.effects.iq_imbalance.stage!r}")

@@ -213,14 +213,26 @@ def _run_parallel(fn: Callable, jobs: list, workers: int, progress: bool, desc: 
         bar.close()
 
 
+# Settings added after worlds were cached, and when they leave the data as it was before they existed:
+# there they stay out of the key, so every world cached before keeps its key (tests/world/test_points_world.py).
+ADDED_LATER: tuple[tuple[str, Callable[[WorldConfig], bool]], ...] = (
+    ("scene.facet_turn", lambda w: w.scene.facet_turn == 0.0),
+    ("scene.scattering", lambda w: w.scene.scattering == "surfaces"),
+    ("scene.points", lambda w: w.scene.scattering == "surfaces"),  # read by bone_points scattering only
+    ("leap.jitter_floor_m", lambda w: w.leap.jitter_floor_m == 0.0),
+)
+
+
 def dataset_path(world: Any, radar: RadarConfig, chain: ChainConfig, cache_dir: str | Path,
                  window_starts: Sequence[int] | None = None) -> tuple[Path, str]:
     """Cache file of the world's dataset and its config hash (radar, chain, world physics, generator
     version, and the imposed window start frames if any)."""
     world = world_config(world)
     physics = {k: v for k, v in world.to_dict().items() if k != "workers"}  # workers do not change the data
-    if physics["scene"]["facet_turn"] == 0.0:  # added later: at its default the data is unchanged, so are the keys
-        del physics["scene"]["facet_turn"]
+    for key, unchanged in ADDED_LATER:
+        if unchanged(world):
+            section, name = key.split(".")
+            del physics[section][name]
     parts = (physics, capture_radar(radar, world), chain, WORLD_VERSION, "fast-path")
     h = config_hash(*parts, [int(s) for s in window_starts]) if window_starts is not None else config_hash(*parts)
     return Path(cache_dir) / f"world_{h}.h5", h

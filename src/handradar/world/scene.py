@@ -54,6 +54,10 @@ below the antenna: Q is replaced by its image Q') and hand-hand, between ``sampl
 texture points of each hand; their radar legs use the points' visibility, the bounce legs are not
 ray-cast. The strongest ``n_paths`` are kept.
 
+``scene.scattering: bone_points`` builds the direct returns from discrete point scatterers with
+an RCS law of their own instead (handradar.world.points, :func:`point_tracks`); the bounces, the
+shadowing and the static clutter are the same.
+
 Tracks: one per facet, at the mean range of its elements, with the complex sum of its elements
 and texture points, each taken relative to that range with the wavenumber :func:`group_wavenumber`
 (the slope of the phase that the chain's range FFT sees), so a facet's track reproduces its
@@ -65,6 +69,7 @@ step; :class:`SurfaceTracks` evaluates the sums at any instant (the renderer: ev
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -78,6 +83,7 @@ from handradar.radar.signal import carrier_phase_rad
 from handradar.world.config import AntennaPattern, Effects, Scene, StaticClutter
 from handradar.world.kinematics import Pose
 from handradar.world.optics import SERIES_BELOW_RAD, quadratic_integral
+from handradar.world.points import bone_points, point_rcs
 
 REF_RANGE_M = 0.3
 REF_RCS_M2 = 0.01
@@ -1205,12 +1211,15 @@ def _sample_points(rng: np.random.Generator, slot: np.ndarray, lit: np.ndarray,
 
 
 def bounce_paths(c: np.ndarray, n: np.ndarray, vis: np.ndarray, slot: np.ndarray, rep_area: np.ndarray,
-                 effects: Effects, scene: Scene) -> tuple[np.ndarray, np.ndarray, list[str]]:
+                 effects: Effects, scene: Scene, rcs: Callable[..., np.ndarray] | None = None,
+                 ) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Double-bounce paths between sampled surface points: ranges (T, P), amplitudes (T, P), labels.
 
     c, n: (T, M, 3) positions and normals of the sampled points; vis (T, M) their radar-leg visibility;
-    rep_area (M,) the area each one stands for.
+    rep_area (M,) the area each one stands for; rcs: their bistatic law (normal, area, u_in, u_out,
+    scene) -> m^2, the skin's :func:`facet_rcs` unless given.
     """
+    rcs = rcs or facet_rcs
     mp = effects.multipath
     k_amp = amplitude_scale(scene)
     gain = antenna_gain(c, effects.antenna_pattern)  # (T, M)
@@ -1244,8 +1253,8 @@ def bounce_paths(c: np.ndarray, n: np.ndarray, vis: np.ndarray, slot: np.ndarray
             u_in_q = -u_out_p
             coef = np.full(len(pi), 2.0)
         d = np.linalg.norm(leg, axis=-1)
-        s_p = facet_rcs(n[:, pi], rep_area[pi], to_radar[:, pi], u_out_p, scene)
-        s_q = facet_rcs(n[:, qi], rep_area[qi], u_in_q, to_radar[:, qi], scene)
+        s_p = rcs(n[:, pi], rep_area[pi], to_radar[:, pi], u_out_p, scene)
+        s_q = rcs(n[:, qi], rep_area[qi], u_in_q, to_radar[:, qi], scene)
         amp = (k_amp * coef * np.sqrt(s_p * s_q / (4 * np.pi)) * np.sqrt(gain[:, pi] * gain[:, qi])
                / (r[:, pi] * np.maximum(d, 1e-3) * r[:, qi]) * vis[:, pi] * vis[:, qi])
         out_r.append((r[:, pi] + d + r[:, qi]) / 2)
@@ -1399,22 +1408,72 @@ def surface_tracks(parts: list[Part], surf: Surfaces, effects: Effects, scene: S
     return st.subset(lit), tex, cast, tex_vis, el.facet_label[lit]
 
 
+@dataclass
+class BounceSources:
+    """The points that may take part in double bounces: positions and outward normals (T, M, 3) at
+    every physics step, the area each stands for (M,) m^2, hand slot (M,), visibility (Tc, M) at the
+    cast steps ``cast`` (Tc,), and their bistatic RCS law (:func:`bounce_paths`'s ``rcs``)."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    area: np.ndarray
+    slot: np.ndarray
+    cast: np.ndarray
+    vis: np.ndarray
+    rcs: Callable[..., np.ndarray]
+
+
+def point_tracks(parts: list[Part], surf: Surfaces, effects: Effects, scene: Scene, rng: np.random.Generator,
+                 times: np.ndarray, every: int) -> tuple[ScatterTracks, BounceSources]:
+    """Direct returns of the parts' bone point scatterers (``scene.scattering: bone_points``; the
+    placement and the RCS law: handradar.world.points), one track per point, and the points for
+    the bounces. Points that never face the radar are dropped; burial and shadowing are evaluated
+    as for the surfaces (every other cast step, and at the cast steps, interpolated linearly in
+    between), and points whose peak stays ``scene.prune_db`` below the strongest are dropped."""
+    ps = bone_points(parts, scene.points.spacing_m, rng)
+    r = np.linalg.norm(ps.points, axis=-1)  # (T, N)
+    to_radar = -ps.points / r[..., None]
+    sigma = point_rcs(ps.normals, ps.gain * ps.area, to_radar, to_radar, scene)
+    facing = np.flatnonzero((sigma > 0).any(0))
+    ps, r, sigma = ps.take(facing), r[:, facing], sigma[:, facing]
+    cast = cast_steps(len(times), every)
+    sub = np.unique(np.r_[np.arange(0, len(cast), 2), len(cast) - 1])
+    hidden = _hold(sub, buried(parts, ps.part, ps.points[cast[sub]], cast[sub]), len(cast))
+    front = (sigma[cast] > 0) & ~hidden
+    vis = cast_visibility(surf, cast, ps.points[cast], front) if effects.occlusion.enabled else front.astype(float)
+    amps = (amplitude_scale(scene) * np.sqrt(sigma) * antenna_gain(ps.points, effects.antenna_pattern) / r ** 2
+            * _lerp(cast, vis, len(times)) * np.exp(1j * ps.phase))
+    peak = np.abs(amps).max(0)
+    keep = peak > (peak.max() if peak.size else 0.0) * 10 ** (-scene.prune_db / 20)
+    direct = ScatterTracks(times, r[:, keep], amps[:, keep], np.full(int(keep.sum()), DIRECT), ps.label[keep])
+    return direct, BounceSources(ps.points, ps.normals, ps.area * ps.gain, ps.slot, cast, vis, point_rcs)
+
+
 def scene_tracks(pose: Pose, effects: Effects, scene: Scene, rng: np.random.Generator,
                  radar: RadarConfig) -> ScatterTracks:
-    """All scatterers of one recording at the pose times (physics rate)."""
+    """All scatterers of one recording at the pose times (physics rate): the direct returns of the
+    surfaces (:func:`surface_tracks`) or of bone point scatterers (:func:`point_tracks`, as
+    ``scene.scattering`` says), double bounces between their points, static clutter."""
     parts = build_parts(pose, effects, scene)
     surf = occluders_of(parts)
     every = max(1, round(scene.rate_hz / scene.visibility_rate_hz))
-    st, tex, cast, tex_vis, labels = surface_tracks(parts, surf, effects, scene, radar, rng, pose.times, every)
-    amps = st.amplitudes(pose.times)
-    tracks = [ScatterTracks(pose.times, st.facet_ranges, amps, np.full(st.n_facets, DIRECT), labels, st)]
+    if scene.scattering == "bone_points":
+        direct, src = point_tracks(parts, surf, effects, scene, rng, pose.times, every)
+    else:
+        st, tex, cast, tex_vis, labels = surface_tracks(parts, surf, effects, scene, radar, rng, pose.times, every)
+        direct = ScatterTracks(pose.times, st.facet_ranges, st.amplitudes(pose.times), np.full(st.n_facets, DIRECT),
+                               labels, st)
+        src = BounceSources(tex.points, tex.normals, tex.area, tex.slot, cast, tex_vis, facet_rcs)
+    amps = direct.amplitudes
+    tracks = [direct]
     if effects.multipath.enabled:
-        pick, share = _sample_points(rng, tex.slot, (tex_vis > 0).any(0), effects.multipath.samples_per_hand)
-        rep = tex.area[pick] * share  # the lit area each sampled point stands for
+        pick, share = _sample_points(rng, src.slot, (src.vis > 0).any(0), effects.multipath.samples_per_hand)
+        rep = src.area[pick] * share  # the lit area each sampled point stands for
         # double bounces are evaluated at the visibility rate and interpolated linearly in between
+        cast = src.cast
         sub = np.ix_(cast, pick)
-        br, ba, bl = bounce_paths(tex.points[sub], tex.normals[sub], tex_vis[:, pick], tex.slot[pick], rep,
-                                  effects, scene)
+        br, ba, bl = bounce_paths(src.points[sub], src.normals[sub], src.vis[:, pick], src.slot[pick], rep,
+                                  effects, scene, src.rcs)
         br, ba = (_lerp(cast, x, len(pose.times)) for x in (br, ba))
         peak_direct = np.abs(amps).max() if amps.size else 0.0
         keep = np.abs(ba).max(0) > peak_direct * 10 ** (-scene.prune_db / 20)

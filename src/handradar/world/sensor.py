@@ -7,6 +7,8 @@
 - calibration: the Leap sees the hands through the *true* Leap-to-radar transform, which differs
   from meta.json's nominal ``leap_to_radar`` by a small rotation and translation;
 - tracking jitter: per-joint noise, first-order correlated in time, of a set 3-D rms;
+- jitter floor (``leap.jitter_floor_m``, not an effect: on whatever the effects): white per-joint
+  noise of a set 3-D rms in every frame, the sensor's static precision;
 - dropouts: frames with no hands, in Markov bursts.
 
 Frames are written with handradar.hand.leap (leap_frames_from_sequence / write_leap_jsonl).
@@ -132,6 +134,8 @@ def observe(motion: Motion, capture_s: float, leap: LeapSensor, effects: Effects
         drop[[0, -1]] = False  # readers need the span covered
         mask[drop] = False
         dropped = int(drop.sum())
+    if leap.jitter_floor_m > 0:  # the sensor's own floor, on whatever the effects; drawn last, so 0 changes no draw
+        mm = mm + rng.standard_normal(mm.shape) * (leap.jitter_floor_m * 1e3 / math.sqrt(3))
     # what the Leap measured, in the nominal radar frame (written back with the nominal inverse)
     radar_nominal = mm @ nominal[:3, :3].T + nominal[:3, 3]
     return LeapObservation(stamps, radar_nominal, mask, start_us, offset, true, dropped)
