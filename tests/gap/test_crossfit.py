@@ -178,3 +178,36 @@ if __name__ == "__main__":
     radar = RadarConfig.from_cfg_text(DEFAULT_CFG, "default.cfg")
     chain = dataclasses.replace(ChainConfig(), n_columns=8)  # the short_chain fixture
     GOLDEN.write_text(json.dumps(_comparable(single_split_run(radar, chain).report), indent=1) + "\n")
+
+
+def test_folds_share_their_simulations_and_report_what_unshared_ones_would(radar, short_chain, monkeypatch):
+    """Two folds fit the same grid on complementary rows: the all-rows fit and the out-of-fold
+    predictions take their rows from the folds' fits. Step 1 then simulates each grid point and the
+    base once per row, and the report equals that of a diagnosis that simulates everything again."""
+    import handradar.gap.diagnosis as diagnosis_module
+    from handradar.gap.engine import SpectrogramCache
+
+    caches: list[SpectrogramCache] = []
+
+    class Recorded(SpectrogramCache):
+        def __init__(self) -> None:
+            super().__init__()
+            caches.append(self)
+
+    class NoReuse(Recorded):
+        def missing(self, key, rows):
+            return np.asarray(rows, dtype=np.int64)
+
+    data = gap_data(radar, short_chain, 16, {"antenna_pattern": {"q": 6.0}}, seed=2)
+    cfg = DiagnosisConfig(folds=2, candidates=["antenna_pattern", "palm"], rcs_exponents=[1.0], n_boot=300,
+                          radarweightnet=False, greedy_max=1)
+    reports = []
+    for cache_class in (Recorded, NoReuse):
+        monkeypatch.setattr(diagnosis_module, "SpectrogramCache", cache_class)
+        reports.append(diagnose(data, builder(radar, short_chain), {}, cfg, progress=False).report)
+        reports[-1].pop("timings_s")
+    # equal to float rounding (a row's batch mates change the BLAS sums), verdicts and choices exactly
+    _assert_same(json.loads(json.dumps(reports[0])), json.loads(json.dumps(reports[1])))
+    grid = 5 + 5  # antenna_pattern's and palm's grid points
+    assert caches[0].misses == (grid + 1) * 16  # each grid point and the base once per row
+    assert caches[1].misses > 2 * caches[0].misses  # the folds' fits, the all-rows fit and the predictions

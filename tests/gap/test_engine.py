@@ -99,3 +99,27 @@ def test_step_0_scores_every_grid_point_as_its_own_simulator_would(radar, short_
             spec = build.replace(**point)()(torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks),
                                            times=torch.as_tensor(rs.times))
         assert score == pytest.approx(float(per_example_ssim(torch.as_tensor(measured), spec).mean()), abs=1e-5)
+
+
+def test_the_cache_simulates_each_row_of_each_simulator_once(radar, short_chain):
+    """Variants that are the same simulator share their rows across calls and engines; only rows not
+    simulated yet are simulated, and what comes back equals the uncached engine's."""
+    from handradar.gap.engine import SpectrogramCache
+
+    rs, _, _ = rows(radar, short_chain, 6, seed=2)
+    build, cache = builder(radar, short_chain), SpectrogramCache()
+    variants = [{}, {"palm": {"radius_m": 0.03}}, {"antenna_pattern": {"q": 6.0}}]
+    plain = VariantEngine(build, {}, rs, batch_size=2).spectrograms(variants)
+    engine = VariantEngine(build, {}, rs, batch_size=2, cache=cache)
+    first = engine.spectrograms(variants, np.arange(4))
+    assert (cache.misses, cache.hits) == (3 * 4, 0)
+    again = engine.spectrograms(variants, np.arange(6))  # rows 0-3 cached, 4-5 simulated
+    assert (cache.misses, cache.hits) == (3 * 6, 0) and np.array_equal(again[:, :4], first)
+    np.testing.assert_allclose(again, plain, atol=1e-6)
+    # another engine whose base already holds the palm: {palm} + {} is the palm variant above
+    other = VariantEngine(build, {"palm": {"radius_m": 0.03}}, rs, batch_size=2, cache=cache)
+    out = other.spectrograms([{}], np.arange(6))
+    assert cache.misses == 3 * 6 and cache.hits == 6 and np.array_equal(out[0], again[1])
+    # another factory setting is another simulator
+    VariantEngine(build.replace(rcs_exponent=0.5), {}, rs, batch_size=2, cache=cache).spectrograms([{}], np.arange(2))
+    assert cache.misses == 3 * 6 + 2

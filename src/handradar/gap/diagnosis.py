@@ -84,7 +84,7 @@ from tqdm.auto import tqdm
 
 from handradar.data.splits import class_counts, stratified_partition
 from handradar.gap.data import GapData
-from handradar.gap.engine import Variant, VariantEngine, merge
+from handradar.gap.engine import SpectrogramCache, Variant, VariantEngine, merge
 from handradar.gap.fit import (
     GridFit,
     calibrate_settings,
@@ -505,6 +505,8 @@ class _Steps:
         self.features_exponent = 1.0
         self.profiles: SlotProfileCache | None = None
         self.runner = _Runner(data, cfg, progress)
+        # every engine of the diagnosis shares it: the folds' fits and predictions overlap (engine doc)
+        self.spectrograms = SpectrogramCache()
         self.report: dict = {}
 
     def bone_features(self, sim: Simulator) -> None:
@@ -525,7 +527,7 @@ class _Steps:
         """Variants of ``current`` under the fold's calibrated factory (``cached``: from the fold's cached
         slot profiles, which are those of its step-0 baseline: only when ``current`` is that baseline)."""
         return VariantEngine(fold.build, current, self.data.rows, batch_size=self.cfg.batch_size,
-                             base_profiles=fold.profiles if cached else None)
+                             base_profiles=fold.profiles if cached else None, cache=self.spectrograms)
 
     def fit_folds(self, currents: Sequence[Variant], names: Sequence[str], step: str,
                   cached: bool = False) -> list[dict[str, GridFit]]:
@@ -581,12 +583,13 @@ class _Steps:
             with _bar(len(fold.fit_idx) * len(self.generic_grid), "step 0: calibrate the generic settings",
                       self.progress) as bar:
                 best, scores = calibrate_settings(build, self.base, d.rows, fold.fit_idx, d.measured,
-                                                  self.generic_grid, batch_size=cfg.batch_size, progress=bar.update)
+                                                  self.generic_grid, batch_size=cfg.batch_size, progress=bar.update,
+                                                  cache=self.spectrograms)
             calibration = {**best, "grid": [{**point, "ssim": sc} for point, sc in zip(self.generic_grid, scores)]}
             build = build.replace(**best)
         with _bar(len(fold.fit_idx) * len(self.base), "step 0: fit the baseline's effects", self.progress) as bar:
             base, fits = fit_baseline_effects(build, self.base, d.rows, fold.fit_idx, d.measured, grids=cfg.grids,
-                                              batch_size=cfg.batch_size, progress=bar.update)
+                                              batch_size=cfg.batch_size, progress=bar.update, cache=self.spectrograms)
         calibration["effects"] = {k: dict(base[k]) for k in fits}
         calibration["effect_grids"] = {k: f.as_dict() for k, f in fits.items()}
         fold.build, fold.base, fold.calibration = build, base, calibration
@@ -771,6 +774,8 @@ def diagnose(data: GapData, build: SimFactory, base: Variant, cfg: DiagnosisConf
             timings[name] = round(time.perf_counter() - t0, 2)
             log.info("%s: %.1f s", name, timings[name])
         run.report["timings_s"] = timings
+        log.info("row-variants simulated: %d; taken from the diagnosis's cache: %d", run.spectrograms.misses,
+                 run.spectrograms.hits)
         return Diagnosis(run.report, run.cal, run.ev, data.measured[run.ev], run.base_spec,
                          {c.effect: c.spectrograms for c in run.cands}, run.after_spec, run.rwn_spec, run.ev_meta,
                          run.rwn_rows)

@@ -30,6 +30,11 @@ With coherence < 1 (Simulator.spectrogram) each path also gives the slots' own p
 (signal path), the base's with slot 38 (where added points go) replaced, or the variant's slot
 profiles' (re-weighted or full). Exact, computed only for variants that need it.
 
+With a :class:`SpectrogramCache`, a variant's spectrogram of a row is simulated once per diagnosis:
+engines whose variants are the same simulator (the same factory settings and effects, so the same
+:meth:`Simulator.key`) share it. Cross-fitting's folds fit the same grid on complementary rows, so
+the all-rows fit and each fold's out-of-fold predictions are mostly already there.
+
 Reflection points with zero gain in a whole batch (an untracked hand) are skipped, and rows that
 track the same hands are batched together, so one-hand rows cost about half.
 
@@ -38,7 +43,8 @@ Public API:
     RowSet(skeletons (N, T, 2, 21, 3), masks (N, T, 2), times (T,), visibility (N, T, 2, 19) | None)
         .take(idx) -> RowSet
     build: a handradar.sim.factory.SimFactory, build(effects {name: {param: value}}) -> Simulator
-    VariantEngine(build, base, rows, batch_size=8)
+    SpectrogramCache()  .hits, .misses (row-variants taken from it / simulated into it)
+    VariantEngine(build, base, rows, batch_size=8, cache=None)
         .spectrograms(variants, idx=None, progress=None, factories=None) -> (V, n, doppler, columns) float32
         .signals(variant, idx, grad=False) -> iterator of (batch idx, spectrograms) (differentiable)
 """
@@ -52,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from handradar.provenance import config_hash
 from handradar.radar.chain import profile_power
 from handradar.sim.effects import REGISTRY
 from handradar.sim.factory import SimFactory
@@ -284,14 +291,45 @@ class _Appended:
         return self.profiles.sum(1) if self.profiles.shape[1] else None
 
 
+class SpectrogramCache:
+    """Spectrograms (doppler, columns) float32 by simulator (its :meth:`Simulator.key`) and row, for the
+    engines of one diagnosis on one RowSet. A noise variant's draw depends on the batch it was simulated
+    in; a cached row keeps the draw of the first simulation (every grid point of one fit still shares
+    its rows' draws: they are simulated in the same pass)."""
+
+    def __init__(self) -> None:
+        self._specs: dict[str, dict[int, np.ndarray]] = {}
+        self.hits = self.misses = 0
+
+    @staticmethod
+    def key(sim: Simulator) -> str:
+        return config_hash(sim.key())
+
+    def missing(self, key: str, rows: np.ndarray) -> np.ndarray:
+        have = self._specs.get(key, {})
+        return np.asarray([r for r in rows if int(r) not in have], dtype=np.int64)
+
+    def put(self, key: str, rows: np.ndarray, specs: np.ndarray) -> None:
+        have = self._specs.setdefault(key, {})
+        for r, spec in zip(rows, specs):
+            have[int(r)] = spec
+        self.misses += len(rows)
+
+    def get(self, key: str, rows: np.ndarray) -> np.ndarray:
+        have = self._specs[key]
+        return np.stack([have[int(r)] for r in rows])
+
+
 class VariantEngine:
     """Spectrograms of variants of a base simulator on a RowSet (module doc: which path each takes)."""
 
     def __init__(self, build: SimFactory, base: Variant, rows: RowSet, *, batch_size: int = 8,
-                 base_profiles: Callable[[np.ndarray], torch.Tensor] | None = None) -> None:
+                 base_profiles: Callable[[np.ndarray], torch.Tensor] | None = None,
+                 cache: SpectrogramCache | None = None) -> None:
         self.build, self.base, self.rows, self.batch_size = build, {k: dict(v) for k, v in base.items()}, rows, batch_size
         self.base_sim = build(self.base)
         self.base_profiles = base_profiles  # rows -> the base's slot profiles (e.g. from the slot-profile cache)
+        self.cache = cache
         self.paths: Counter = Counter()  # (effects, path) -> batches: which shortcut each variant took
 
     def _batches(self, idx: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
@@ -370,12 +408,38 @@ class VariantEngine:
         seed in every call, so variants and repeated calls see the same draws (common random numbers).
         on_base(rows, base slot profiles) sees each batch's base profiles (per-bone decomposition).
         factories: each variant's factory (default: the engine's), e.g. other generic settings.
+        With the engine's cache, only the rows a variant's simulator has not simulated yet are simulated.
         """
         idx = np.arange(len(self.rows)) if idx is None else np.asarray(idx, dtype=np.int64)
+        if not len(idx):
+            raise ValueError("no rows to simulate")
         if factories is not None and len(factories) != len(variants):
             raise ValueError(f"{len(factories)} factories for {len(variants)} variants")
         sims = [(self.build if factories is None else factories[j])(merge(self.base, v))
                 for j, v in enumerate(variants)]
+        if self.cache is None:
+            return self._simulate(variants, sims, idx, progress, on_base)
+        keys = [self.cache.key(sim) for sim in sims]
+        if not keys:
+            return self._simulate(variants, sims, idx, progress, on_base)
+        need = [j for j, k in enumerate(keys) if len(self.cache.missing(k, idx))]
+        todo = idx if on_base is not None else np.unique(np.concatenate([self.cache.missing(keys[j], idx) for j in need]
+                                                                         or [idx[:0]]))
+        if len(todo):
+            # a cached variant is not simulated again (its rows are cached); a needed one on every row of todo
+            specs = self._simulate([variants[j] for j in need], [sims[j] for j in need], todo, progress, on_base)
+            for j, spec in zip(need, specs):
+                fresh = np.isin(todo, self.cache.missing(keys[j], todo))
+                self.cache.put(keys[j], todo[fresh], spec[fresh])
+        if progress is not None and len(todo) < len(idx):
+            progress(len(idx) - len(todo))
+        self.cache.hits += sum(len(idx) for j in range(len(variants)) if j not in need)
+        return np.stack([self.cache.get(k, idx) for k in keys])
+
+    def _simulate(self, variants: Sequence[Variant], sims: Sequence[Simulator], idx: np.ndarray,
+                  progress: Callable[[int], None] | None, on_base: Callable[[np.ndarray, torch.Tensor], None] | None
+                  ) -> np.ndarray:
+        """(V, n, doppler, columns): every variant's spectrograms on rows ``idx``, batch by batch."""
         paths = [self._path(sim, v) for sim, v in zip(sims, variants)]
         out: np.ndarray | None = None
         for pos, rows in self._batches(idx):
@@ -391,8 +455,8 @@ class VariantEngine:
                 out[j, pos] = spec
             if progress is not None:
                 progress(len(rows))
-        if out is None:
-            raise ValueError("no rows to simulate")
+        if out is None:  # no variant: the base alone was wanted (on_base)
+            return np.zeros((0, len(idx)), np.float32)
         return out
 
     def signals(self, sim: Simulator, added: Variant, idx: np.ndarray) -> Iterator[tuple[np.ndarray, torch.Tensor]]:

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from handradar.gap.engine import RowSet, VariantEngine, merge
+from handradar.gap.engine import RowSet, SpectrogramCache, VariantEngine, merge
 from handradar.gap.report import GENERIC_SETTINGS
 from handradar.metrics import fast_ssim_loss, per_example_ssim
 from handradar.sim.effects import REGISTRY
@@ -89,7 +89,8 @@ def generic_grid(values: Mapping[str, Sequence[float] | None]) -> list[dict[str,
 
 def calibrate_settings(build: SimFactory, base: Mapping, rows: RowSet, idx: np.ndarray, measured: np.ndarray,
                        grid: Sequence[Mapping[str, float]], *, batch_size: int = 8,
-                       progress: Callable[[int], None] | None = None) -> tuple[dict[str, float], list[float]]:
+                       progress: Callable[[int], None] | None = None,
+                       cache: SpectrogramCache | None = None) -> tuple[dict[str, float], list[float]]:
     """The generic simulator settings (of ``grid``: e.g. ``{"rcs_exponent": 0.5, "bone_extent": 1.0}``
     per point) under which the baseline simulator scores the highest mean SSIM on rows ``idx``, and the
     score of each point (ties: the first).
@@ -103,7 +104,7 @@ def calibrate_settings(build: SimFactory, base: Mapping, rows: RowSet, idx: np.n
     for j, point in enumerate(grid):
         by_exponent.setdefault(float(point.get("rcs_exponent", build.rcs_exponent)), []).append(j)
     for exponent, js in by_exponent.items():
-        engine = VariantEngine(build.replace(rcs_exponent=exponent), base, rows, batch_size=batch_size)
+        engine = VariantEngine(build.replace(rcs_exponent=exponent), base, rows, batch_size=batch_size, cache=cache)
         factories = [build.replace(**{k: float(v) for k, v in grid[j].items()}) for j in js]
         specs = engine.spectrograms([{}] * len(js), idx, factories=factories,
                                     progress=None if progress is None else lambda n, k=len(js): progress(n * k))
@@ -114,8 +115,8 @@ def calibrate_settings(build: SimFactory, base: Mapping, rows: RowSet, idx: np.n
 
 def fit_baseline_effects(build: SimFactory, base: Mapping[str, Mapping[str, float]], rows: RowSet, idx: np.ndarray,
                          measured: np.ndarray, *, grids: Mapping[str, Mapping[str, Sequence[float]]] | None = None,
-                         batch_size: int = 8, progress: Callable[[int], None] | None = None
-                         ) -> tuple[dict[str, dict[str, float]], dict[str, GridFit]]:
+                         batch_size: int = 8, progress: Callable[[int], None] | None = None,
+                         cache: SpectrogramCache | None = None) -> tuple[dict[str, dict[str, float]], dict[str, GridFit]]:
     """The effects already in the baseline ``base`` fitted on rows ``idx``: each on its grid
     (:func:`effect_grid`), the best point by mean SSIM, and the fitted baseline.
 
@@ -128,7 +129,7 @@ def fit_baseline_effects(build: SimFactory, base: Mapping[str, Mapping[str, floa
     current = {k: dict(v) for k, v in base.items()}
     fits: dict[str, GridFit] = {}
     for name in in_vocabulary_order(current):
-        engine = VariantEngine(build, current, rows, batch_size=batch_size)
+        engine = VariantEngine(build, current, rows, batch_size=batch_size, cache=cache)
         fits[name] = grid_fit(engine, [name], idx, measured, progress=progress, grids=grids)[name]
         current[name] = dict(fits[name].best)
     return current, fits
