@@ -116,7 +116,7 @@ def _one_row_job(data: Path, tmp_path: Path):
 
 
 def test_one_row_per_gesture_fits(radar, short_chain, tmp_path: Path):
-    """One training row of each of 6 gestures: the closed loop fits on all 6, cross-fitted (folds=auto)."""
+    """One training row of each of 6 gestures: the closed loop fits on all 6 (one calibration/evaluation split)."""
     classes = [f"{c}{k}" for k in (1, 2) for c in CLASSES]
     data = _measured(tmp_path / "measured.h5", radar, short_chain, per_class=3, classes=classes)
     run_dir = run(_one_row_job(data, tmp_path), tmp_path / "run")
