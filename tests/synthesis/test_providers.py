@@ -20,7 +20,9 @@ from handradar.hand.skeleton import N_BONES
 from handradar.sim.simulator import Simulator
 from handradar.synthesis.fit import (
     Phase,
+    Shrunk,
     fit_weight_net,
+    guarded_weight_net,
     load_pairs,
     load_weight_net,
     predict,
@@ -100,6 +102,30 @@ def test_weight_net_learns_what_the_model_lacks(measured, radar, short_chain, tm
     assert synth_scores(sim, net2, test) == pytest.approx(after)
 
 
+def test_guarded_weight_net_keeps_what_helps_held_out_and_shrinks_what_does_not(measured, radar, short_chain,
+                                                                              tmp_path):
+    """Where the measurements carry per-bone gains the plain model lacks, held-out rows show the
+    network's gain and it is kept (shrink > 0); where the measurement is the plain model itself, nothing
+    is left to learn, held-out SSIM cannot improve and the network is shrunk to weight 1 (the model)."""
+    sim = Simulator(radar, short_chain, hand=HAND, skeleton_rate_hz=RATE)
+    rows = np.arange(12)
+    caches = cache_rows(measured, rows, sim, tmp_path / "cache", n_jobs=1)
+    with h5py.File(measured) as h5:
+        labels = h5["labels"][()][rows]
+    kw = {"phases": [Phase(25, 3e-3, 4), Phase(10, 1e-3, 4)], "net_kwargs": {"hidden": 32, "fc": (32, 32)},
+          "n_boot": 300}
+    gains = load_pairs(caches, spectrograms_of(measured, rows), rows)
+    net, report = guarded_weight_net(sim, gains, labels, folds=2, **kw)
+    assert report["shrink"] > 0 and report["gain_ci95"][0] > 0, report
+    assert report["heldout_ssim"][str(report["shrink"])] > report["heldout_ssim"]["0.0"]
+    plain = load_pairs(caches, predict(sim, None, gains).numpy(), rows)  # measured = the model itself
+    net, report = guarded_weight_net(sim, plain, labels, folds=2, **kw)
+    assert report["shrink"] == 0.0 and report["gain"] <= 0.0, report
+    torch.testing.assert_close(predict(sim, net, plain), predict(sim, None, plain), atol=1e-5, rtol=0)
+    with pytest.raises(ValueError, match="shrink"):
+        Shrunk(net.net, 1.5)
+
+
 def test_fit_is_reproducible_and_resumable(measured, radar, short_chain, tmp_path):
     sim = Simulator(radar, short_chain, hand=HAND, skeleton_rate_hz=RATE)
     caches = cache_rows(measured, np.arange(6), sim, tmp_path / "cache", n_jobs=1)
@@ -132,6 +158,13 @@ def test_providers_follow_the_contract(measured, radar, short_chain, tmp_path):
                                 phases=[Phase(2, 1e-3, 4)], net_kwargs={"hidden": 16, "fc": (16, 16)}, n_jobs=1,
                                 sim={"hand": HAND})
         assert again == out  # cached
+    guarded = synthesize_rows(measured, rows, "enhanced", fit_rows=np.arange(8), seed=0, cache_dir=tmp_path,
+                              phases=[Phase(2, 1e-3, 4)], net_kwargs={"hidden": 16, "fc": (16, 16)}, n_jobs=1,
+                              sim={"hand": HAND}, guard_folds=2)
+    assert guarded != out  # another key
+    with h5py.File(guarded) as h5:
+        report = json.loads(h5.attrs["rwn_guard"])
+    assert report["folds"] == 2 and report["rows"] == 8 and report["shrink"] in (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
 def test_motion_window_picks_the_gesture():

@@ -4,7 +4,9 @@ Two paths, one simulator:
 
 - rows of a radar dataset (:func:`synthesize_rows`, the ``synth.provider`` of train.py): each
   requested row's skeleton window is simulated with the modelling-only simulator (mode "model")
-  or with simulator + RadarWeightNet fitted on the radar data of ``fit_rows`` (mode "enhanced");
+  or with simulator + RadarWeightNet fitted on the radar data of ``fit_rows`` (mode "enhanced": with
+  ``guard_folds`` >= 2 fitted with held-out rows and shrunk toward weight 1 where they show no gain,
+  handradar.synthesis.fit.guarded_weight_net; its report in the file's attribute ``rwn_guard``);
 - sequences of any skeleton source (:func:`synthesize_source`, used by ``handradar-synth`` and the
   ``synth.external_provider``): each sequence is resampled to the simulator's skeleton rate, the
   spectrogram-long window with the most joint motion is simulated (the gesture), optionally
@@ -40,6 +42,7 @@ The defaults are :func:`synthesize_rows` and :func:`synthesize_external` (conf/t
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
@@ -66,6 +69,7 @@ from handradar.sim.simulator import Simulator
 from handradar.synthesis.fit import (
     Phase,
     fit_weight_net,
+    guarded_weight_net,
     load_pairs,
     load_weight_net,
     predict_cached,
@@ -131,7 +135,7 @@ def spectrograms_of(dataset: str | Path, rows: np.ndarray) -> np.ndarray:
 
 # ---- writing synthetic datasets ------------------------------------------------------------------------
 def _write_rows_like(out: Path, real_path: Path, rows: np.ndarray, spectrograms: np.ndarray, h: str,
-                     sim: Simulator, mode: str) -> Path:
+                     sim: Simulator, mode: str, extra_attrs: Mapping[str, str] | None = None) -> Path:
     """A dataset with the labels, skeletons and meta of ``rows`` of ``real_path`` and new spectrograms."""
     attrs = read_attrs(real_path)
     meta = read_meta_group(real_path)
@@ -139,7 +143,8 @@ def _write_rows_like(out: Path, real_path: Path, rows: np.ndarray, spectrograms:
         labels, skel, mask = h5["labels"][()], h5["skeletons"], h5["hand_mask"]
         with open_writer(out, classes=attrs["classes"], radar=attrs["radar"], chain=attrs["chain"],
                          skeleton_rate_hz=float(attrs["skeleton_rate_hz"]), n_steps=skel.shape[1], config_hash=h,
-                         extra_attrs={"source": f"handradar.synth:{mode}", "synthetic_of": str(real_path)}) as w:
+                         extra_attrs={"source": f"handradar.synth:{mode}", "synthetic_of": str(real_path),
+                                      **(extra_attrs or {})}) as w:
             for i, r in enumerate(rows):
                 r = int(r)
                 w.append(spectrograms[i], int(labels[r]), skel[r], mask[r], float(h5["window_start_s"][r]),
@@ -150,10 +155,12 @@ def _write_rows_like(out: Path, real_path: Path, rows: np.ndarray, spectrograms:
 def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["model", "enhanced"], *,
                     fit_rows: np.ndarray, seed: int, cache_dir: str | Path, sim: SimSpec = None,
                     phases: Sequence[Phase | dict] | None = None, net_kwargs: dict | None = None,
-                    n_jobs: int = 2) -> Path:
+                    guard_folds: int = 0, n_jobs: int = 2) -> Path:
     """``synth.provider`` (contract in handradar.synthesis.providers): one synthetic row per requested row.
 
-    mode "enhanced" fits RadarWeightNet on the radar data of ``fit_rows`` only (never test rows).
+    mode "enhanced" fits RadarWeightNet on the radar data of ``fit_rows`` only (never test rows);
+    ``guard_folds`` >= 2: with that many held-out folds of them, shrunk toward weight 1 where they show
+    no gain (handradar.synthesis.fit.guarded_weight_net); 0: the paper's one fit.
     """
     real_path = Path(real_path)
     rows = np.asarray(rows, dtype=np.int64)
@@ -165,11 +172,12 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
 
     key = config_hash(file_hash(real_path), rows.tolist(), mode, fit_rows.tolist() if mode == "enhanced" else None,
                       seed, simulator.key(), [asdict(p) for p in phases] if mode == "enhanced" else None,
-                      net_kwargs or {})
+                      net_kwargs or {}, *([guard_folds] if mode == "enhanced" and guard_folds else []))
     out = Path(cache_dir) / f"synthetic-{mode}-{key}.h5"
     if out.is_file():
         return out
     cache_dir = Path(cache_dir)
+    extra: dict[str, str] = {}
     if mode == "model":
         caches = cache_rows(real_path, rows, simulator, cache_dir, features=False, n_jobs=n_jobs)
         spec = predict_cached(simulator, None, caches, np.arange(len(rows))).numpy()
@@ -179,10 +187,20 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
         targets = spectrograms_of(real_path, both)
         local = {int(r): i for i, r in enumerate(both)}
         train = load_pairs(caches, targets, np.asarray([local[int(r)] for r in fit_rows]))
-        net = fit_weight_net(simulator, train, phases=phases, seed=seed, net_kwargs=net_kwargs)
+        if guard_folds >= 2:
+            with h5py.File(real_path, "r") as h5:
+                labels = h5["labels"][()][fit_rows]
+            net, report = guarded_weight_net(simulator, train, labels, folds=guard_folds, phases=phases, seed=seed,
+                                             net_kwargs=net_kwargs)
+            log.info("RadarWeightNet with %d held-out folds of %d rows: held-out gain %+.3f [%+.3f, %+.3f] "
+                     "unshrunk; shrink %g toward weight 1", guard_folds, len(fit_rows), report["gain"],
+                     *report["gain_ci95"], report["shrink"])
+            extra = {"rwn_guard": json.dumps(report)}
+        else:
+            net = fit_weight_net(simulator, train, phases=phases, seed=seed, net_kwargs=net_kwargs)
         del train
         spec = predict_cached(simulator, net, caches, np.asarray([local[int(r)] for r in rows])).numpy()
-    return _write_rows_like(out, real_path, rows, spec.astype(np.float32), key, simulator, mode)
+    return _write_rows_like(out, real_path, rows, spec.astype(np.float32), key, simulator, mode, extra)
 
 
 # ---- skeleton sources ----------------------------------------------------------------------------------

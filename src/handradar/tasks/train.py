@@ -382,11 +382,24 @@ class Job:
                 path = provider(real.path, split.pool, adds, fit_rows=split.train, seed=self.seed + 1000 * draw,
                                 cache_dir=Path(self.cfg.synth.cache_dir), **kw)
                 load_synthetic(path, real.y[split.pool], real.x.shape[1:])  # checks the provider's contract
+                self.log_rwn_guard(path, draw)
                 parts.append(FileRows(Path(path)))
             return parts
         if adds == "cgan":
             return [ArrayRows(*self.cgan_samples(split))]
         raise ValueError(f"unknown addition {adds!r}")
+
+    def log_rwn_guard(self, path: str | Path, draw: int) -> None:
+        """The held-out gain and shrink of a guarded RadarWeightNet (the file's ``rwn_guard``), as run metrics."""
+        raw = read_attrs(path).get("rwn_guard")
+        if raw is None:
+            return
+        g = json.loads(raw)
+        tag = "" if draw == 0 else f"_draw{draw}"
+        self.tracker.log_metrics({f"synth/rwn_heldout_gain{tag}": g["gain"], f"synth/rwn_heldout_gain_ci_low{tag}":
+                                  g["gain_ci95"][0], f"synth/rwn_shrink{tag}": g["shrink"]})
+        log.info("RadarWeightNet: held-out gain %+.3f [%+.3f, %+.3f] over %d rows in %d folds; shrunk by %g toward "
+                 "weight 1", g["gain"], *g["gain_ci95"], g["rows"], g["folds"], g["shrink"])
 
     def fitted_sim(self, split: Split) -> dict | None:
         """The ``sim`` settings fitted on the real training rows (``synth.fit_sim``; None: ``sim`` as
