@@ -54,8 +54,12 @@ def test_build_tables_layout():
     fitted = build_tables([{"params": {**_few(0.05, "fixed"), "synth.fit_sim": "effects"}, "metrics": {"test/acc_model_synth": 0.6}},
                            {"params": {**_few(0.05, "fixed"), "synth.fit_sim": "none"}, "metrics": {"test/acc_model_synth": 0.2}},
                            {"params": {**_few(0.05, "fixed"), "synth.fit_sim": "effects", "synth.samples_per_row": "2",
-                                       "synth.randomize.rcs_exponent": "0.1"}, "metrics": {"test/acc_model_synth": 0.4}}])[0]
-    assert sorted(fitted.sorted_rows()) == ["5 %*", "5 %* [fitted: effects, 2 draws]", "5 %* [fitted: effects]"]
+                                       "synth.randomize.rcs_exponent": "0.1"}, "metrics": {"test/acc_model_synth": 0.4}},
+                           {"params": {**_few(0.05, "fixed"), "synth.fit_sim": "effects", "synth.rwn_folds": "2"},
+                            "metrics": {"test/acc_enhanced_synth": 0.5}}])[0]
+    assert sorted(fitted.sorted_rows()) == ["5 %*", "5 %* [fitted: effects, 2 draws]",
+                                            "5 %* [fitted: effects, RadarWeightNet guarded, 2 folds]",
+                                            "5 %* [fitted: effects]"]
     # one job's table (what train.py prints)
     assert job_table(_few(0.5), {"test/acc_radar_only": 0.9}).endswith("| 50 % | 0.900 | – | – | – | – | – | – |")
 

@@ -192,6 +192,8 @@ def synthesis_setting(p: Mapping[str, str]) -> str:
         parts.append(f"{int(float(p['synth.samples_per_row']))} draws")
     elif any(k.startswith("synth.randomize.") for k in p):
         parts.append("randomised")
+    if int(float(p.get("synth.rwn_folds", 0))) > 0:  # RadarWeightNet fitted with held-out rows (guarded)
+        parts.append(f"RadarWeightNet guarded, {int(float(p['synth.rwn_folds']))} folds")
     return f" [{', '.join(parts)}]" if parts else ""
 
 
