@@ -307,3 +307,28 @@ def test_benchmark_resumes_finished_cases_and_redoes_only_the_missing_one(tmp_pa
     assert [r["cause"] for r in third["results"]] == [r["cause"] for r in first["results"]]
     assert (tmp_path / "run3" / "cases" / "antenna_pattern" / "gap_report.json").is_file()
     assert not (tmp_path / "run3" / "cases" / "nothing").exists()
+
+
+def test_several_effects_withheld_at_once_are_one_case_judged_by_what_is_kept():
+    from handradar.gap.benchmark import kept_scores
+    from handradar.gap.records import found, wrong_cause
+
+    (case,) = cases(["tracking_jitter+forearm+multipath"])
+    assert case.on == ("tracking_jitter", "forearm", "multipath") and case.truth == case.name
+    world = case_world({}, case)
+    assert {k for k, v in world["effects"].items() if v["enabled"]} == {"tracking_jitter", "forearm", "multipath"}
+    for bad in ("forearm+forearm", "forearm+nothing", "forearm+warp"):
+        with pytest.raises(ValueError, match="joined by"):
+            cases([bad])
+    assert kept_scores(["forearm", "noise"], case.truth) == {"kept_precision": 0.5, "kept_recall": pytest.approx(1 / 3)}
+    assert kept_scores([], case.truth) == {"kept_precision": None, "kept_recall": 0.0}
+    r = {"truth": case.truth, "cause": "forearm", "top_candidate": "forearm", "after_effects": ["forearm"]}
+    assert found(r) and not wrong_cause(r)
+    assert wrong_cause({**r, "cause": "noise"}) and not found({**r, "cause": "noise", "top_candidate": "noise"})
+    res = [{**r, "case": case.name, "true_gap_closed": None, "after_gap_closed": 0.2, **kept_scores(["forearm"], case.truth),
+            "reference_gap_closed": 0.3},
+           {"case": "nothing", "truth": "none", "cause": "none", "true_gap_closed": None, "after_gap_closed": 0.0}]
+    s = score(res)
+    assert s["effects_total"] == 0 and s["controls_total"] == 1  # the several-effect case is scored apart
+    assert s["several"] == [{"case": case.name, "after_effects": ["forearm"], "kept_precision": 1.0,
+                             "kept_recall": pytest.approx(1 / 3), "after_gap_closed": 0.2, "reference_gap_closed": 0.3}]

@@ -90,13 +90,18 @@ CONTROL_OUTSIDE = "iq_imbalance"  # the reference world's effect outside the voc
 class Case:
     name: str
     on: tuple[str, ...]  # world effects switched on (vocabulary or not)
-    truth: str  # the right attribution: an effect name or "none"
+    truth: str  # the right attribution: an effect name, "none", or effects joined by "+" (several withheld)
 
 
 def cases(names: Sequence[str]) -> list[Case]:
+    """Cases by name: an effect, a control, or effects joined by "+" (withheld together, e.g.
+    "sync_offset+multipath+occlusion": the realistic case, judged by the effects the selection keeps)."""
     out = []
     for n in names:
-        if n in EFFECTS:
+        parts = n.split("+")
+        if len(parts) > 1 and all(p in EFFECTS for p in parts) and len(set(parts)) == len(parts):
+            out.append(Case(n, tuple(parts), n))
+        elif n in EFFECTS:
             out.append(Case(n, (n,), n))
         elif n == CONTROL_NOTHING:
             out.append(Case(n, (), "none"))
@@ -104,7 +109,7 @@ def cases(names: Sequence[str]) -> list[Case]:
             out.append(Case(n, (CONTROL_OUTSIDE,), "none"))
         else:
             raise ValueError(f"benchmark case {n!r}: expected one of {list(EFFECTS)}, "
-                             f"{CONTROL_NOTHING!r} or {CONTROL_OUTSIDE!r}")
+                             f"{CONTROL_NOTHING!r}, {CONTROL_OUTSIDE!r} or distinct effects joined by '+'")
     return out
 
 
@@ -210,7 +215,7 @@ def score(results: Sequence[Mapping]) -> dict:
     matrix = np.zeros((len(rows), len(labels)), dtype=int)
     for i, r in enumerate(results):
         matrix[i, labels.index(r["cause"])] = 1
-    effect_cases = [r for r in results if r["truth"] != "none"]
+    effect_cases = [r for r in results if r["truth"] != "none" and "+" not in r["truth"]]
     controls = [r for r in results if r["truth"] == "none"]
     closed = [r["true_gap_closed"] for r in effect_cases if r.get("true_gap_closed") is not None]
     return {"labels": labels, "cases": rows, "matrix": matrix.tolist(),
@@ -220,6 +225,9 @@ def score(results: Sequence[Mapping]) -> dict:
             "controls_inconclusive": sum(r["cause"] == "inconclusive" for r in controls),
             "mean_true_gap_closed": float(np.mean(closed)) if closed else None,
             "effects_found": sum(found(r) for r in effect_cases), "wrong_causes": sum(wrong_cause(r) for r in results),
+            "several": [{k: r.get(k) for k in ("case", "after_effects", "kept_precision", "kept_recall",
+                                                 "after_gap_closed", "reference_gap_closed")}
+                        for r in results if "+" in r["truth"]],
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
@@ -324,11 +332,21 @@ def truth_side(worlds: BenchmarkWorlds, path: Path, clean: Path, *, baseline: np
     return out
 
 
+def kept_scores(kept: Sequence[str], truth: str) -> dict:
+    """Precision and recall of the effects the greedy selection kept against a case's withheld ones
+    (precision None when nothing was kept)."""
+    truths, kept = set(truth.split("+")) - {"none"}, list(kept)
+    hits = len(truths.intersection(kept))
+    return {"kept_precision": hits / len(kept) if kept else None,
+            "kept_recall": hits / len(truths) if truths else None}
+
+
 def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
     cands = {c["effect"]: c for c in report["candidates"]}
     true = cands.get(case.truth)
     top = report["candidates"][0] if report["candidates"] else None
-    return {"case": case.name, "truth": case.truth, "cause": report["cause"], "correct": report["cause"] == case.truth,
+    return {"case": case.name, "truth": case.truth, "cause": report["cause"],
+            "correct": report["cause"] in case.truth.split("+"),
             "top_candidate": top["effect"] if top else None, "top_gap_closed": top["gap_closed"] if top else None,
             "top_ci95": top["ci95"] if top else None,
             "true_gap_closed": None if true is None else true["gap_closed"],
@@ -337,6 +355,7 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "true_rank": None if true is None else [c["effect"] for c in report["candidates"]].index(case.truth) + 1,
             "baseline_ssim": report["baseline"]["ssim"], "after_effects": report["after"]["effects"],
             "after_gap_closed": report["after"]["gap_closed"], "lead_ci95": report["evidence"].get("lead_ci95"),
+            **kept_scores(report["after"]["effects"], case.truth),
             "recordings_needed": report["evidence"].get("recordings_needed"),
             "leader_specificity": top.get("specificity") if top else None,
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
@@ -384,6 +403,10 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
              f"{scores['controls_inconclusive']} of {scores['controls_total']} controls.** "
              f"Mean gap_closed by the withheld effect: {sgn(scores['mean_true_gap_closed'])}; "
              f"by the greedy selection: {sgn(scores['mean_after_gap_closed'])}.", "",
+             *[f"**Withheld together, {s['case']}**: the selection keeps {', '.join(s['after_effects']) or 'nothing'} "
+               f"(precision {fmt_number(s['kept_precision'])}, recall {fmt_number(s['kept_recall'])}) and closes "
+               f"{sgn(s['after_gap_closed'])} of the gap; the world's own change on the simulator closes "
+               f"{sgn(s.get('reference_gap_closed'))}.\n" for s in scores.get("several", [])],
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "over the same window of each recording (mean / median): how visible the withheld effect is in the radar "
              "data at all. `world's change on the simulator` is the gap_closed [95 % CI] of the diagnosis's baseline "

@@ -34,7 +34,8 @@ SCORE_KEYS = ("effects_correct", "effects_found", "wrong_causes", "effects_total
               "controls_total", "effects_inconclusive", "controls_inconclusive", "mean_true_gap_closed",
               "mean_after_gap_closed")
 CASE_KEYS = ("case", "truth", "cause", "correct", "recordings_needed", "true_gap_closed", "true_ci95",
-             "true_rank", "top_candidate", "top_gap_closed", "after_effects")
+             "true_rank", "top_candidate", "top_gap_closed", "after_effects", "after_gap_closed", "kept_precision",
+             "kept_recall", "reference_gap_closed")
 # Effects no candidate scored row by row can earn (the world's palm return is an interference pattern that
 # 0.5 mm of geometry redraws): judged "must not mislead" (docs/gap_validation.md#how-a-case-is-judged)
 MUST_NOT_MISLEAD = frozenset({"palm"})
@@ -44,10 +45,10 @@ def found(case: Mapping) -> bool:
     """The case's answer counts as found: the true effect named, or leading an "inconclusive" verdict; for an
     effect in MUST_NOT_MISLEAD also "none", or "inconclusive" with no other effect kept by the greedy
     selection (a record without ``after_effects`` cannot show that). A control is found when it says "none"."""
-    truth, cause = case["truth"], case["cause"]
+    truth, cause, truths = case["truth"], case["cause"], case["truth"].split("+")
     if truth == "none":
         return cause == "none"
-    if cause == truth or (cause == "inconclusive" and case.get("top_candidate") == truth):
+    if cause in truths or (cause == "inconclusive" and case.get("top_candidate") in truths):
         return True
     if truth not in MUST_NOT_MISLEAD or cause not in VERDICTS:
         return False
@@ -56,8 +57,8 @@ def found(case: Mapping) -> bool:
 
 
 def wrong_cause(case: Mapping) -> bool:
-    """The worst answer: an effect named that is not the withheld one (any effect, for a control)."""
-    return case["cause"] not in VERDICTS and case["cause"] != case["truth"]
+    """The worst answer: an effect named that is not withheld (any effect, for a control)."""
+    return case["cause"] not in VERDICTS and case["cause"] not in case["truth"].split("+")
 REQUIRED = ("format", "world", "size", "world_version", "command", "commit", "seeds", "machine", "scores", "cases")
 
 
