@@ -181,9 +181,10 @@ if __name__ == "__main__":
 
 
 def test_folds_share_their_simulations_and_report_what_unshared_ones_would(radar, short_chain, monkeypatch):
-    """Two folds fit the same grid on complementary rows: the all-rows fit and the out-of-fold
-    predictions take their rows from the folds' fits. Step 1 then simulates each grid point and the
-    base once per row, and the report equals that of a diagnosis that simulates everything again."""
+    """Two folds fit the same grid on complementary rows: the all-rows fit pools their grid scores and
+    the out-of-fold predictions take their rows from the other fold's fit. Step 1 then simulates each
+    grid point and the base once per row, and the report equals that of a diagnosis that simulates
+    everything again."""
     import handradar.gap.diagnosis as diagnosis_module
     from handradar.gap.engine import SpectrogramCache
 
@@ -210,4 +211,30 @@ def test_folds_share_their_simulations_and_report_what_unshared_ones_would(radar
     _assert_same(json.loads(json.dumps(reports[0])), json.loads(json.dumps(reports[1])))
     grid = 5 + 5  # antenna_pattern's and palm's grid points
     assert caches[0].misses == (grid + 1) * 16  # each grid point and the base once per row
-    assert caches[1].misses > 2 * caches[0].misses  # the folds' fits, the all-rows fit and the predictions
+    # simulating again: the folds' fits, then the predictions of the base and both candidates (the
+    # all-rows fit pools the folds' grid scores: it simulates nothing either way)
+    assert caches[1].misses == (grid + 3) * 16
+
+
+def test_pooled_fits_are_the_fit_on_the_union_of_their_rows():
+    """Grid scores are means over rows: pooling two fits weighted by their rows gives the mean over the
+    union, so the best point is the one a fit on all rows would pick; -inf (a broken point) stays -inf."""
+    from handradar.gap.fit import pool_fits
+
+    rng = np.random.default_rng(0)
+    per_row = rng.uniform(0.5, 1.0, (3, 30))  # 3 grid points x 30 rows
+    grid = [{"q": 1.0}, {"q": 2.0}, {"q": 4.0}]
+    a, b = np.arange(12), np.arange(12, 30)
+
+    def fit(rows):
+        scores = list(per_row[:, rows].mean(1))
+        return {"antenna_pattern": GridFit("antenna_pattern", grid, scores, grid[int(np.argmax(scores))], max(scores))}
+
+    pooled = pool_fits([fit(a), fit(b)], [len(a), len(b)])["antenna_pattern"]
+    np.testing.assert_allclose(pooled.scores, per_row.mean(1))
+    assert pooled.best == grid[int(np.argmax(per_row.mean(1)))]
+    broken = fit(b)
+    broken["antenna_pattern"].scores[0] = float("-inf")
+    assert pool_fits([fit(a), broken], [12, 18])["antenna_pattern"].scores[0] == float("-inf")
+    with pytest.raises(ValueError, match="different grids"):
+        pool_fits([fit(a), {"antenna_pattern": GridFit("antenna_pattern", grid[:2], [0.1, 0.2])}], [1, 1])

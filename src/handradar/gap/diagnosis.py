@@ -47,7 +47,8 @@ evaluation rows, since every recording is one), the greedy selection (each fold 
 effect at its own fitted values; which effect is chosen is decided on the out-of-fold scores),
 ``after``, and step 2 (from the out-of-fold baseline). The reported parameters (candidates'
 ``params``, ``after.params``, ``baseline.effects`` and ``calibration``, hence fitted_sim.yaml) come
-from one more fit of every step on all N rows; each fold's own are ``fold_params`` per candidate and
+from all N rows: step 0 fitted once more, each candidate's grid scores pooled over the folds
+(handradar.gap.fit.pool_fits; refitted with ``refine_steps``); each fold's own are ``fold_params`` per candidate and
 ``baseline.calibration.folds``. Not cross-fitted: the RadarWeightNet readout (step 5) trains on the
 other folds of fold 0 and is scored on fold 0's rows only (``radarweightnet.evaluation_rows``).
 Report convention: ``n_evaluation`` = N; ``n_calibration`` = the fewest rows any fold's fits saw
@@ -93,6 +94,7 @@ from handradar.gap.fit import (
     generic_grid,
     grid_fit,
     in_vocabulary_order,
+    pool_fits,
     refine,
 )
 from handradar.gap.report import FACTORS, FORMAT, GENERIC_SETTINGS
@@ -531,9 +533,18 @@ class _Steps:
 
     def fit_folds(self, currents: Sequence[Variant], names: Sequence[str], step: str,
                   cached: bool = False) -> list[dict[str, GridFit]]:
-        """Candidates ``names`` fitted in every fold on its training rows, given its effects ``currents[j]``."""
-        return [self.runner.fit(self.engine(f, cur, cached), names, f.fit_idx, f.refine_idx, step)
-                for f, cur in zip(self.folds, currents)]
+        """Candidates ``names`` fitted in every fold on its training rows, given its effects ``currents[j]``.
+        Cross-fitted (grids only), the all-rows fit pools the folds' grid scores (handradar.gap.fit.pool_fits):
+        each row's score under its fold's calibration, nothing simulated again."""
+        fits = [self.runner.fit(self.engine(f, cur, cached), names, f.fit_idx, f.refine_idx, step)
+                for f, cur in zip(self.scored, currents)]
+        if len(self.folds) == len(self.scored):  # one split: its fit is the reported one
+            return fits
+        if self.cfg.refine_steps > 0:  # gradient steps leave the grid: refit on all rows
+            reported = self.folds[-1]
+            return [*fits, self.runner.fit(self.engine(reported, currents[-1]), names, reported.fit_idx,
+                                           reported.refine_idx, step)]
+        return [*fits, pool_fits(fits, [len(f.fit_idx) for f in self.scored])]
 
     def predict_folds(self, currents: Sequence[Variant], fold_fits: Sequence[dict[str, GridFit]], step: str,
                       on_base=None, cached: bool = False) -> np.ndarray:

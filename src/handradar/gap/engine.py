@@ -33,7 +33,7 @@ profiles' (re-weighted or full). Exact, computed only for variants that need it.
 With a :class:`SpectrogramCache`, a variant's spectrogram of a row is simulated once per diagnosis:
 engines whose variants are the same simulator (the same factory settings and effects, so the same
 :meth:`Simulator.key`) share it. Cross-fitting's folds fit the same grid on complementary rows, so
-the all-rows fit and each fold's out-of-fold predictions are mostly already there.
+each fold's out-of-fold predictions are mostly already there.
 
 Reflection points with zero gain in a whole batch (an untracked hand) are skipped, and rows that
 track the same hands are batched together, so one-hand rows cost about half.

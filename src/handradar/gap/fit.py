@@ -14,6 +14,8 @@ their grids, then optional gradient steps.
     grid_fit(engine, candidates, idx, measured, grids=None) -> {effect: GridFit}
         one pass over the rows scores every grid point of every candidate (mean SSIM; a grid point
         whose spectrograms are not finite scores -inf)
+    pool_fits([{effect: GridFit}], rows) -> {effect: GridFit}
+        the same grids' scores pooled over fits on different rows (weighted by their row counts)
     refine(engine, name, values, idx, measured, steps, lr) -> dict[str, float]
         Adam on the effect's parameters (step sizes a fraction ``lr`` of each parameter's range),
         projected into bounds after each step; used for effects with ``fit == "grad"``
@@ -157,6 +159,23 @@ def grid_fit(engine: VariantEngine, candidates: Sequence[str], idx: np.ndarray, 
         j = int(np.argmax(f.scores))
         f.best, f.best_score = dict(f.grid[j]), f.scores[j]
     return fits
+
+
+def pool_fits(fits: Sequence[Mapping[str, GridFit]], rows: Sequence[int]) -> dict[str, GridFit]:
+    """Each candidate's grid scored over the rows of several fits at once: the mean SSIM of every grid
+    point over their rows (each fit's mean weighted by its ``rows``), the best point of that. Cross-fitting's
+    folds fit on rows that together cover every row equally often, so this is the all-rows fit wherever the
+    folds were fitted under the same calibration, without simulating anything again."""
+    out: dict[str, GridFit] = {}
+    for name in fits[0]:
+        grids = [f[name] for f in fits]
+        if any(g.grid != grids[0].grid for g in grids):
+            raise ValueError(f"{name}: the fits to pool scored different grids")
+        scores = [float(np.average(col, weights=rows)) if np.all(np.isfinite(col)) else float("-inf")
+                  for col in zip(*(g.scores for g in grids))]
+        j = int(np.argmax(scores))
+        out[name] = GridFit(name, [dict(p) for p in grids[0].grid], scores, dict(grids[0].grid[j]), scores[j])
+    return out
 
 
 def refine(engine: VariantEngine, name: str, values: dict[str, float], idx: np.ndarray, measured: np.ndarray, *,
