@@ -139,7 +139,7 @@ LEGEND = ("Each column is one benchmark run: for every case, a reference world w
 
 def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benchmark") -> str:
     """The one summary table of ``records`` (cases x runs), its legend once, then each run's provenance
-    and the settings tried on it (``variants``)."""
+    (the settings tried on a run stay in its record's ``variants``; docs/gap_validation.md lists them)."""
     if not records:
         return f"# Gap benchmark\n\n(no records in {source})\n"
     heads = [f"{r['world']} {r['size']}" for r in records]
@@ -173,14 +173,4 @@ def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benc
         split = f", {r['split']}" if r.get("split") else ""
         lines.append(f"- **{h}**: `{r['command']}` at `{r['commit']}` ({r['world_version']}), seed {seeds}{split}, "
                      f"{r['machine']}{wall}." + (f" {r['note']}" if r.get("note") else ""))
-    variants = [(h, v) for h, r in zip(heads, records) for v in r.get("variants") or []]
-    if variants:
-        lines += ["", "## Settings tried on these runs", "",
-                  "| run | setting | effects named | controls none | inconclusive (effects, controls) | command | commit |",
-                  "|---|---|---|---|---|---|---|"]
-        for h, v in variants:
-            x = v["scores"]
-            lines.append(f"| {h} | {v.get('what') or v['name']} | {x['effects_correct']} of {x['effects_total']} | "
-                         f"{x['controls_correct']} of {x['controls_total']} | {x['effects_inconclusive']}, "
-                         f"{x['controls_inconclusive']} | `{v['command']}` | `{v['commit']}` ({v['world_version']}) |")
     return "\n".join(lines) + "\n"
