@@ -158,7 +158,8 @@ def fake_overrides(data: Path, tmp: Path, *, logger: str = "none", extra: tuple[
     """Overrides that point a train.py config at a fake dataset, fake providers, a tiny net and tmp paths."""
     return ["data=hdf5", f"data.path={data}", f"paths.log_dir={tmp}/logs", f"paths.cache_dir={tmp}/cache",
             "model.net._target_=tests.tasks.fakes.tiny_cnn", "~model.net.stem_stride",
-            "~synth.provider.sim", "~synth.provider.phases", "synth.provider._target_=tests.tasks.fakes.fake_provider",
+            "~synth.provider.sim", "~synth.provider.phases", "~synth.provider.guard_folds",
+            "synth.provider._target_=tests.tasks.fakes.fake_provider",
             "~synth.external_provider.radar", "~synth.external_provider.chain", "~synth.external_provider.sim",
             "synth.external_provider._target_=tests.tasks.fakes.fake_external_provider",
             "synth.fit_sim=none",  # fake skeletons cannot be simulated (tests/tasks/test_closed_loop.py fits)
