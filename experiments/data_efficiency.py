@@ -1,12 +1,14 @@
 """The data-efficiency curve from the MLflow runs of ``+experiment=data_efficiency`` (``make data-efficiency-figure``).
 
-    python -m experiments.data_efficiency [--tracking-uri URI] [--out FILE]
+    python -m experiments.data_efficiency [--tracking-uri URI] [--log-dir DIR] [--out FILE]
 
 Test accuracy against the real training rows per gesture (``split.per_class``), mean ± std over
 seeds: radar only; + synthetic data from the simulator fitted on those rows; synthetic only with
 that simulator; synthetic only with the paper's unfitted simulator (``synth.fit_sim=none``: no real
 row involved, drawn at 0); the pool's real spectrograms as the ceiling. Prints the curve as a
-markdown table, then the effects the fitted simulator kept at each size, then the figure's path.
+markdown table, then the fitted simulator at each size per seed (its RCS exponent, the effects it kept
+and their values: from the run's ``synth.fitted.*`` params, or its job's ``fitted_sim.yaml`` under
+``--log-dir``), then the figure's path.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ import sys
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+
+from omegaconf import OmegaConf
 
 from handradar.provenance import REPO_ROOT
 from handradar.runs.tables import mean_std, stats
@@ -48,13 +52,33 @@ def curves(records: Iterable[Mapping]) -> dict[str, dict[int, list[float]]]:
     return {name: dict(sorted(points.items())) for name, points in out.items()}
 
 
-def fitted_effects(records: Iterable[Mapping]) -> dict[int, list[str]]:
-    """{rows per gesture: the fitted simulator's kept effects, one entry per seed ("-": none)}."""
+def _fitted_sim(rec: Mapping, log_dir: Path | None) -> dict | None:
+    """The run's fitted simulator (fitted_sim.yaml) from its job's state folder, if it is there."""
+    job = rec.get("tags", {}).get("handradar.job_hash")
+    path = None if log_dir is None or job is None else log_dir / TASK / "state" / job / "fitted_sim.yaml"
+    if path is None or not path.is_file():
+        return None
+    return OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+
+
+def _described(p: Mapping, fitted: Mapping | None) -> str:
+    """``e 0.25; sync_offset (offset_s 0.02), ...``: the fitted RCS exponent and effects with their values."""
+    if fitted is None:
+        exponent = p.get("synth.fitted.rcs_exponent")
+        return (f"e {float(exponent):g}; " if exponent is not None else "") + p["synth.fitted.effects"]
+    effects = [f"{e} ({', '.join(f'{k} {v:g}' for k, v in fitted.get('effect_params', {}).get(e, {}).items())})"
+               for e in fitted.get("effects", [])]
+    return f"e {float(fitted.get('rcs_exponent', 1.0)):g}; " + (", ".join(effects) or "-")
+
+
+def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None) -> dict[int, list[str]]:
+    """{rows per gesture: the fitted simulator, one entry per seed: its RCS exponent and kept effects
+    ("-": none), with their values where the job's fitted_sim.yaml is under ``log_dir``}."""
     out: dict[int, list[str]] = defaultdict(list)
     for rec in sorted(records, key=lambda r: str(r["params"].get("seed"))):
         p = rec["params"]
         if p.get("task_name") == TASK and "synth.fitted.effects" in p and p.get("split.per_class") not in (None, "None"):
-            out[int(float(p["split.per_class"]))].append(f"seed {p.get('seed')}: {p['synth.fitted.effects']}")
+            out[int(float(p["split.per_class"]))].append(f"seed {p.get('seed')}: {_described(p, _fitted_sim(rec, log_dir))}")
     return dict(sorted(out.items()))
 
 
@@ -107,13 +131,14 @@ def main(argv: list[str] | None = None) -> Path:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tracking-uri", default=DEFAULT_URI)
+    ap.add_argument("--log-dir", type=Path, default=REPO_ROOT / "logs", help="where the jobs' state folders are")
     ap.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "figures" / "data_efficiency.png")
     args = ap.parse_args(argv)
     records = load_records(args.tracking_uri)
     data = curves(records)
     if not data:
         raise SystemExit(f"no finished {TASK} runs in {args.tracking_uri}: run `make data-efficiency` first")
-    print(markdown(data, fitted_effects(records)))
+    print(markdown(data, fitted_effects(records, args.log_dir)))
     out = plot(data, args.out)
     print(out)
     return out

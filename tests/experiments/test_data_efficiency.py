@@ -39,6 +39,16 @@ def test_curves_group_by_rows_and_simulator():
     assert fitted_effects(RECORDS) == {1: ["seed 1: -", "seed 2: -"], 4: ["seed 1: sync_offset"]}
 
 
+def test_fitted_values_come_from_the_jobs_fitted_simulator(tmp_path: Path):
+    state = tmp_path / "data_efficiency" / "state" / "abc"
+    state.mkdir(parents=True)
+    (state / "fitted_sim.yaml").write_text("rcs_exponent: 0.25\neffects: [sync_offset]\n"
+                                           "effect_params: {sync_offset: {offset_s: 0.02}}\n")
+    recs = [{**RECORDS[2], "tags": {"handradar.job_hash": "abc"}},
+            {**RECORDS[0], "params": {**RECORDS[0]["params"], "synth.fitted.rcs_exponent": "0.1"}}]
+    assert fitted_effects(recs, tmp_path) == {1: ["seed 1: e 0.1; -"], 4: ["seed 1: e 0.25; sync_offset (offset_s 0.02)"]}
+
+
 def test_markdown_and_figure(tmp_path: Path):
     data = curves(RECORDS)
     md = markdown(data, fitted_effects(RECORDS))
