@@ -121,6 +121,23 @@ def test_how_a_case_is_judged(truth, cause, top, kept, is_found, is_wrong):
     assert (found(case), wrong_cause(case)) == (is_found, is_wrong)
 
 
+@pytest.mark.parametrize("truth, cause, top, kept, is_found, is_wrong", [
+    ("occlusion", "tracking_jitter", "tracking_jitter", ["tracking_jitter"], False, False),  # the floor: not wrong
+    ("occlusion", "tracking_jitter", "tracking_jitter", ["tracking_jitter", "occlusion"], True, False),  # kept
+    ("occlusion", "multipath", "multipath", ["multipath"], False, True),
+    ("palm", "inconclusive", "tracking_jitter", ["tracking_jitter"], True, False),  # nothing but the floor kept
+    ("none", "tracking_jitter", "tracking_jitter", ["tracking_jitter"], True, False),
+])
+def test_a_jitter_floor_in_every_case_is_never_a_wrong_cause(truth, cause, top, kept, is_found, is_wrong):
+    from handradar.gap.benchmark import always_present
+    from handradar.gap.records import found, wrong_cause
+
+    assert always_present({}) == [] and always_present({"leap": {"jitter_floor_m": 0.0004}}) == ["tracking_jitter"]
+    case = {"truth": truth, "cause": cause, "top_candidate": top, "after_effects": kept,
+            "also_present": ["tracking_jitter"]}
+    assert (found(case), wrong_cause(case)) == (is_found, is_wrong)
+
+
 def _spectrogram_file(path, spec, starts=None):
     with h5py.File(path, "w") as f:
         f["spectrograms"] = np.clip(spec, 0.0, 1.0).astype(np.float32)

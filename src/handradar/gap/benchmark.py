@@ -332,6 +332,12 @@ def truth_side(worlds: BenchmarkWorlds, path: Path, clean: Path, *, baseline: np
     return out
 
 
+def always_present(world: Mapping) -> list[str]:
+    """Vocabulary effects a world has in every case whatever the case switches: tracking jitter where its
+    Leap has a jitter floor (``leap.jitter_floor_m``, not an effect; world=scatterers)."""
+    return ["tracking_jitter"] if world_config(world).leap.jitter_floor_m > 0 else []
+
+
 def kept_scores(kept: Sequence[str], truth: str) -> dict:
     """Precision and recall of the effects the greedy selection kept against a case's withheld ones
     (precision None when nothing was kept)."""
@@ -462,12 +468,13 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     with tracked_run(tracker, run_name=f"{cfg.task_name}-{label}-seed{seed}", tags=tags,
                      config=OmegaConf.to_container(cfg, resolve=True)):
         clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
+        present = always_present(worlds.world)
         for case in cases(list(bench.cases)):
             key = config_hash("gap-benchmark-case", worlds.config(case), diag_cfg, sim_cfg, radar, chain,
                               code_version())
             done = state / f"{case.name}-{key}.json"
             if done.is_file():
-                results.append(json.loads(done.read_text()))
+                results.append({**json.loads(done.read_text()), "also_present": present})
                 log.info("case %s: resumed from %s", case.name, done)
                 continue
             t0 = time.perf_counter()
@@ -483,7 +490,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                    **truth_side(worlds, path, clean, baseline=diagnosis.baseline, rows=diagnosis.evaluation,
                                 candidate=diagnosis.candidates.get(case.truth),
                                 n_boot=int(diag_cfg.get("n_boot", 2000)), seed=seed)}
-            res["seconds"] = time.perf_counter() - t0
+            res["seconds"], res["also_present"] = time.perf_counter() - t0, present
             atomic_write_text(done, json.dumps(res, indent=1) + "\n")
             results.append(res)
             log.info("case %s: truth %s, cause %s (%.0f s)", case.name, case.truth, res["cause"], res["seconds"])

@@ -35,7 +35,7 @@ SCORE_KEYS = ("effects_correct", "effects_found", "wrong_causes", "effects_total
               "mean_after_gap_closed")
 CASE_KEYS = ("case", "truth", "cause", "correct", "recordings_needed", "true_gap_closed", "true_ci95",
              "true_rank", "top_candidate", "top_gap_closed", "after_effects", "after_gap_closed", "kept_precision",
-             "kept_recall", "reference_gap_closed")
+             "kept_recall", "reference_gap_closed", "also_present")
 # Effects no candidate scored row by row can earn (the world's palm return is an interference pattern that
 # 0.5 mm of geometry redraws): judged "must not mislead" (docs/gap_validation.md#how-a-case-is-judged)
 MUST_NOT_MISLEAD = frozenset({"palm"})
@@ -44,21 +44,27 @@ MUST_NOT_MISLEAD = frozenset({"palm"})
 def found(case: Mapping) -> bool:
     """The case's answer counts as found: the true effect named, or leading an "inconclusive" verdict; for an
     effect in MUST_NOT_MISLEAD also "none", or "inconclusive" with no other effect kept by the greedy
-    selection (a record without ``after_effects`` cannot show that). A control is found when it says "none"."""
+    selection (a record without ``after_effects`` cannot show that). A control is found when it says "none".
+    Where effects are present in every case (``also_present``: a world's Leap jitter floor), naming them is
+    right too, and the withheld effect is also found when the greedy selection keeps it."""
     truth, cause, truths = case["truth"], case["cause"], case["truth"].split("+")
+    present, kept = set(case.get("also_present") or []), case.get("after_effects")
     if truth == "none":
-        return cause == "none"
+        return cause == "none" or cause in present
     if cause in truths or (cause == "inconclusive" and case.get("top_candidate") in truths):
+        return True
+    if present and kept is not None and set(truths) & set(kept):
         return True
     if truth not in MUST_NOT_MISLEAD or cause not in VERDICTS:
         return False
-    kept = case.get("after_effects")
-    return cause == "none" or (kept is not None and all(e == truth for e in kept))
+    return cause == "none" or (kept is not None and all(e == truth or e in present for e in kept))
 
 
 def wrong_cause(case: Mapping) -> bool:
-    """The worst answer: an effect named that is not withheld (any effect, for a control)."""
-    return case["cause"] not in VERDICTS and case["cause"] not in case["truth"].split("+")
+    """The worst answer: an effect named that is neither withheld nor present in every case (any other effect,
+    for a control)."""
+    return (case["cause"] not in VERDICTS and case["cause"] not in case["truth"].split("+")
+            and case["cause"] not in (case.get("also_present") or []))
 REQUIRED = ("format", "world", "size", "world_version", "command", "commit", "seeds", "machine", "scores", "cases")
 
 

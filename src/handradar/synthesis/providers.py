@@ -192,9 +192,9 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
                 labels = h5["labels"][()][fit_rows]
             net, report = guarded_weight_net(simulator, train, labels, folds=guard_folds, phases=phases, seed=seed,
                                              net_kwargs=net_kwargs)
-            log.info("RadarWeightNet with %d held-out folds of %d rows: held-out gain %+.3f [%+.3f, %+.3f] "
-                     "unshrunk; shrink %g toward weight 1", guard_folds, len(fit_rows), report["gain"],
-                     *report["gain_ci95"], report["shrink"])
+            log.info("RadarWeightNet with %d held-out folds of %d rows: held-out gain %+.3f [%+.3f, %+.3f] as "
+                     "trained; kept at s = %g (weights 1 + s (w - 1); 0: the modelling-only simulator)", guard_folds,
+                     len(fit_rows), report["gain"], *report["gain_ci95"], report["shrink"])
             extra = {"rwn_guard": json.dumps(report)}
         else:
             net = fit_weight_net(simulator, train, phases=phases, seed=seed, net_kwargs=net_kwargs)
