@@ -107,6 +107,16 @@ def face_grid(poly: np.ndarray, spacing_m: float, rng: np.random.Generator) -> t
     return c + g[:, :1] * e1 + g[:, 1:] * e2, poly_area / len(g)
 
 
+def face_normals(poly: np.ndarray, inside: np.ndarray, rotation: np.ndarray, n: int) -> np.ndarray:
+    """(T, n, 3): the unit normal of a slab face ``poly`` (hand-local, pointing away from the point
+    ``inside``), turned by the part's ``rotation`` (T, 3, 3) at every step, for its ``n`` points."""
+    n_loc = np.cross(poly[1] - poly[0], poly[2] - poly[0])
+    n_loc = n_loc / np.linalg.norm(n_loc)
+    if n_loc @ (poly.mean(0) - inside) < 0:
+        n_loc = -n_loc
+    return np.broadcast_to(np.einsum("tij,j->ti", rotation, n_loc)[:, None, :], (len(rotation), n, 3))
+
+
 def bone_points(parts: Sequence[Any], spacing_m: float, rng: np.random.Generator) -> PointSet:
     """The point scatterers of every part (handradar.world.scene.Part) at every step: cones' grids,
     the palm slab's face grids; the Swerling gains and phases drawn last."""
@@ -123,13 +133,8 @@ def bone_points(parts: Sequence[Any], spacing_m: float, rng: np.random.Generator
             centre = np.r_[p.slab_faces[0][:, :2].mean(0), 0.0]  # inside the convex slab
             for poly in p.slab_faces:
                 local, a = face_grid(poly, spacing_m, rng)
-                n_loc = np.cross(poly[1] - poly[0], poly[2] - poly[0])
-                n_loc = n_loc / np.linalg.norm(n_loc)
-                if n_loc @ (poly.mean(0) - centre) < 0:
-                    n_loc = -n_loc
                 pts.append(p.to_radar(local))
-                nrm.append(np.broadcast_to(np.einsum("tij,j->ti", p.rotation, n_loc)[:, None, :],
-                                           (len(p.rotation), len(local), 3)))
+                nrm.append(face_normals(poly, centre, p.rotation, len(local)))
                 area.append(np.full(len(local), a))
         n = sum(len(a) for a in area) - n_before
         slot.append(np.full(n, p.slot))

@@ -83,7 +83,7 @@ from handradar.radar.signal import carrier_phase_rad
 from handradar.world.config import AntennaPattern, Effects, Scene, StaticClutter
 from handradar.world.kinematics import Pose
 from handradar.world.optics import SERIES_BELOW_RAD, quadratic_integral
-from handradar.world.points import bone_points, point_rcs
+from handradar.world.points import bone_points, face_normals, point_rcs
 
 REF_RANGE_M = 0.3
 REF_RCS_M2 = 0.01
@@ -683,13 +683,8 @@ def skin_texture(parts: list[Part], scene: Scene, rng: np.random.Generator) -> T
             for poly in p.slab_faces:
                 n = max(1, round(_polygon_area(poly) * density))
                 local = _polygon_samples(rng, poly, n)
-                n_loc = np.cross(poly[1] - poly[0], poly[2] - poly[0])
-                n_loc = n_loc / np.linalg.norm(n_loc)
-                if n_loc @ (poly.mean(0) - centre) < 0:
-                    n_loc = -n_loc
                 pts.append(p.to_radar(local))
-                nrm.append(np.broadcast_to(np.einsum("tij,j->ti", p.rotation, n_loc)[:, None, :],
-                                           (len(p.rotation), n, 3)))
+                nrm.append(face_normals(poly, centre, p.rotation, n))
                 area.append(np.full(n, _polygon_area(poly) / n))
                 near = np.linalg.norm(local[:, None] - tri_c[None], axis=-1).argmin(1)
                 facet.append(n_f + near)
