@@ -36,8 +36,8 @@ def _calibration(cal: dict | None) -> str:
         axes = f"({', '.join(['exponent'] + [_GENERIC_TEXT[k][0] for k in extra])})" if extra else "exponent"
         paper = (f"({', '.join(['1'] + [str(_GENERIC_TEXT[k][2]) for k in extra])}) = the paper's model" if extra
                  else "1 = the paper's RCS")
-        text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g}{fitted} on the "
-                f"calibration rows (mean SSIM there by {axes}: {tried}; {paper})")
+        text = (f", with the cylinder RCS aspect exponent calibrated to {cal['rcs_exponent']:g}{fitted} "
+                f"(mean SSIM on the fitting rows by {axes}: {tried}; {paper})")
     if cal.get("effects"):
         text += ("; the baseline's own effects fitted there on their grids: "
                  + "; ".join(f"{k} {_params(v)}" for k, v in cal["effects"].items()))
