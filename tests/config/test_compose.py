@@ -63,7 +63,7 @@ def test_preset_composes_and_instantiates(preset: str, tmp_path: Path):
     assert isinstance(sim, Simulator) and not list(sim.effects)  # the paper's model by default
     if cfg.job == "variants":
         assert list(cfg.variants) == (PAPER_VARIANTS if preset != "data_efficiency" else
-                                      ["radar_only", "model_synth", "model_synth_only", "radar_pool"])
+                                      ["radar_only", "model_synth", "model_synth_only"])
         assert cfg.split.kind in ("few_shot", "ood")
     elif preset == "synth_fit":
         assert callable(import_callable(cfg.job))
