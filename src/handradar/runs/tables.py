@@ -182,9 +182,10 @@ def _pct(fraction: str | float) -> str:
     return f"{float(fraction) * 100:g} %"
 
 
-def synthesis_setting(p: Mapping[str, str]) -> str:
+def synthesis_setting(p: Mapping[str, str], metrics: Mapping[str, float] | None = None) -> str:
     """How a job's synthetic rows were made, when not by the configured simulator as is: its rows
-    must not be averaged with those of other settings (e.g. " [fitted: effects, 2 draws]")."""
+    must not be averaged with those of other settings (e.g. " [fitted: effects, 2 draws]"). A guarded
+    RadarWeightNet is named only where the job trained on RadarWeightNet rows (``metrics``)."""
     parts = []
     if p.get("synth.fit_sim", "none") not in ("none", "None"):
         parts.append(f"fitted: {p['synth.fit_sim']}")
@@ -192,7 +193,8 @@ def synthesis_setting(p: Mapping[str, str]) -> str:
         parts.append(f"{int(float(p['synth.samples_per_row']))} draws")
     elif any(k.startswith("synth.randomize.") for k in p):
         parts.append("randomised")
-    if int(float(p.get("synth.rwn_folds", 0))) > 0:  # RadarWeightNet fitted with held-out rows (guarded)
+    rwn = any(f"test/acc_{v}" in (metrics or {}) for v in ("enhanced_synth", "synth_only"))
+    if rwn and int(float(p.get("synth.rwn_folds", 0))) > 0:  # RadarWeightNet fitted with held-out rows (guarded)
         parts.append(f"RadarWeightNet guarded, {int(float(p['synth.rwn_folds']))} folds")
     return f" [{', '.join(parts)}]" if parts else ""
 
@@ -241,7 +243,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             row, table, key = _pct(p["split.fraction"]) + ("*" if fixed else ""), few, (fixed, float(p["split.fraction"]))
         else:
             continue
-        setting = synthesis_setting(p)
+        setting = synthesis_setting(p, metrics)
         row, key = row + setting, (*key, setting)
         for variant, label in VARIANT_COLUMNS:
             value = metrics.get(f"test/acc_{variant}")
