@@ -38,8 +38,10 @@ CURVES = {
 
 def curves(records: Iterable[Mapping]) -> dict[str, dict[int, list[float]]]:
     """{curve: {rows per gesture: [accuracy per seed]}} of the data-efficiency runs among ``records``
-    (``{"params": flat config, "metrics": {...}}``); the paper's simulator's points sit at 0 rows."""
+    (``{"params": flat config, "metrics": {...}}``, latest first: one value per curve, point and seed,
+    the latest run's); the paper's simulator's points sit at 0 rows."""
     out: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
+    seen: set[tuple] = set()
     for rec in records:
         p, m = rec["params"], rec["metrics"]
         if p.get("task_name") != TASK or p.get("split.per_class") in (None, "None"):
@@ -47,8 +49,10 @@ def curves(records: Iterable[Mapping]) -> dict[str, dict[int, list[float]]]:
         k = int(float(p["split.per_class"]))
         fitted = p.get("synth.fit_sim", "none") not in ("none", "None")
         for name, (metric, wants_fit) in CURVES.items():
-            if metric in m and (wants_fit is None or wants_fit == fitted):
-                out[name][0 if wants_fit is False else k].append(float(m[metric]))
+            point = 0 if wants_fit is False else k
+            if metric in m and (wants_fit is None or wants_fit == fitted) and (name, point, p.get("seed")) not in seen:
+                seen.add((name, point, p.get("seed")))
+                out[name][point].append(float(m[metric]))
     return {name: dict(sorted(points.items())) for name, points in out.items()}
 
 
@@ -74,12 +78,12 @@ def _described(p: Mapping, fitted: Mapping | None) -> str:
 def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None) -> dict[int, list[str]]:
     """{rows per gesture: the fitted simulator, one entry per seed: its RCS exponent and kept effects
     ("-": none), with their values where the job's fitted_sim.yaml is under ``log_dir``}."""
-    out: dict[int, list[str]] = defaultdict(list)
-    for rec in sorted(records, key=lambda r: str(r["params"].get("seed"))):
+    out: dict[int, dict[str, str]] = defaultdict(dict)
+    for rec in records:  # latest first: the latest run per size and seed
         p = rec["params"]
         if p.get("task_name") == TASK and "synth.fitted.effects" in p and p.get("split.per_class") not in (None, "None"):
-            out[int(float(p["split.per_class"]))].append(f"seed {p.get('seed')}: {_described(p, _fitted_sim(rec, log_dir))}")
-    return dict(sorted(out.items()))
+            out[int(float(p["split.per_class"]))].setdefault(str(p.get("seed")), _described(p, _fitted_sim(rec, log_dir)))
+    return {k: [f"seed {s}: {d}" for s, d in sorted(v.items())] for k, v in sorted(out.items())}
 
 
 def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int, list[str]]) -> str:

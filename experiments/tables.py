@@ -38,7 +38,8 @@ log = logging.getLogger(__name__)
 
 
 def load_records(tracking_uri: str) -> list[dict]:
-    """Finished handradar runs as ``{"params", "metrics", "tags", "run_id"}``, latest per job hash."""
+    """Finished handradar runs as ``{"params", "metrics", "tags", "run_id"}``, latest per job hash, the latest
+    first."""
     db = sqlite_path(tracking_uri)
     if db is not None and not db.is_file():  # nothing has run yet: do not create a store
         log.warning("no MLflow store at %s", db)

@@ -36,6 +36,10 @@ def test_curves_group_by_rows_and_simulator():
     assert got["synthetic only (fitted simulator)"] == {1: [0.4, 0.5], 4: [0.6]}
     assert got["synthetic only (paper's simulator)"] == {0: [0.35, 0.45]}  # no real row involved
     assert got["real pool (ceiling)"] == {1: [0.7, 0.7], 4: [0.7]}
+    # an older run of the same point and seed (later in the list: records come latest first) is left out
+    older = rec(1, 1, "effects", radar_only=0.9, model_synth=0.9)
+    assert curves([*RECORDS, older])["radar only"] == {1: [0.2, 0.3], 4: [0.4]}
+    assert fitted_effects([*RECORDS, older]) == fitted_effects(RECORDS)
     assert fitted_effects(RECORDS) == {1: ["seed 1: -", "seed 2: -"], 4: ["seed 1: sync_offset"]}
 
 
