@@ -7,8 +7,9 @@ seeds: radar only; + synthetic data from the simulator fitted on those rows; syn
 that simulator; synthetic only with the paper's unfitted simulator (``synth.fit_sim=none``: no real
 row involved, drawn at 0); the pool's real spectrograms as the ceiling. Prints the curve as a
 markdown table, then the fitted simulator at each size per seed (its RCS exponent, the effects it kept
-and their values: from the run's ``synth.fitted.*`` params, or its job's ``fitted_sim.yaml`` under
-``--log-dir``), then the figure's path.
+and their values, and its held-out SSIM before and after the effects: from the run's ``synth.fitted.*``
+params, or its job's ``fitted_sim.yaml`` and ``fit_report.json`` under ``--log-dir``), then the
+figure's path.
 """
 
 from __future__ import annotations
@@ -56,23 +57,28 @@ def curves(records: Iterable[Mapping]) -> dict[str, dict[int, list[float]]]:
     return {name: dict(sorted(points.items())) for name, points in out.items()}
 
 
-def _fitted_sim(rec: Mapping, log_dir: Path | None) -> dict | None:
-    """The run's fitted simulator (fitted_sim.yaml) from its job's state folder, if it is there."""
+def _state_file(rec: Mapping, log_dir: Path | None, name: str) -> dict | None:
+    """A file of the run's job state folder (fitted_sim.yaml, fit_report.json), read, if it is there."""
     job = rec.get("tags", {}).get("handradar.job_hash")
-    path = None if log_dir is None or job is None else log_dir / TASK / "state" / job / "fitted_sim.yaml"
+    path = None if log_dir is None or job is None else log_dir / TASK / "state" / job / name
     if path is None or not path.is_file():
         return None
     return OmegaConf.to_container(OmegaConf.load(path), resolve=True)
 
 
-def _described(p: Mapping, fitted: Mapping | None) -> str:
-    """``e 0.25; sync_offset (offset_s 0.02), ...``: the fitted RCS exponent and effects with their values."""
+def _described(p: Mapping, fitted: Mapping | None, report: Mapping | None = None) -> str:
+    """``e 0.25; sync_offset (offset_s 0.02), ...; SSIM 0.91 -> 0.93``: the fitted RCS exponent, the effects
+    with their values, and the fit's held-out SSIM before and after them (its fit_report, when there)."""
     if fitted is None:
         exponent = p.get("synth.fitted.rcs_exponent")
-        return (f"e {float(exponent):g}; " if exponent is not None else "") + p["synth.fitted.effects"]
-    effects = [f"{e} ({', '.join(f'{k} {v:g}' for k, v in fitted.get('effect_params', {}).get(e, {}).items())})"
-               for e in fitted.get("effects", [])]
-    return f"e {float(fitted.get('rcs_exponent', 1.0)):g}; " + (", ".join(effects) or "-")
+        text = (f"e {float(exponent):g}; " if exponent is not None else "") + p["synth.fitted.effects"]
+    else:
+        effects = [f"{e} ({', '.join(f'{k} {v:g}' for k, v in fitted.get('effect_params', {}).get(e, {}).items())})"
+                   for e in fitted.get("effects", [])]
+        text = f"e {float(fitted.get('rcs_exponent', 1.0)):g}; " + (", ".join(effects) or "-")
+    if report is not None:
+        text += f"; SSIM {report['baseline']['ssim']:.3f} -> {report['after']['ssim']:.3f}"
+    return text
 
 
 def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None) -> dict[int, list[str]]:
@@ -82,7 +88,9 @@ def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None) -> d
     for rec in records:  # latest first: the latest run per size and seed
         p = rec["params"]
         if p.get("task_name") == TASK and "synth.fitted.effects" in p and p.get("split.per_class") not in (None, "None"):
-            out[int(float(p["split.per_class"]))].setdefault(str(p.get("seed")), _described(p, _fitted_sim(rec, log_dir)))
+            described = _described(p, _state_file(rec, log_dir, "fitted_sim.yaml"),
+                                   _state_file(rec, log_dir, "fit_report.json"))
+            out[int(float(p["split.per_class"]))].setdefault(str(p.get("seed")), described)
     return {k: [f"seed {s}: {d}" for s, d in sorted(v.items())] for k, v in sorted(out.items())}
 
 

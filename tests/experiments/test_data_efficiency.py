@@ -48,9 +48,11 @@ def test_fitted_values_come_from_the_jobs_fitted_simulator(tmp_path: Path):
     state.mkdir(parents=True)
     (state / "fitted_sim.yaml").write_text("rcs_exponent: 0.25\neffects: [sync_offset]\n"
                                            "effect_params: {sync_offset: {offset_s: 0.02}}\n")
+    (state / "fit_report.json").write_text('{"baseline": {"ssim": 0.91}, "after": {"ssim": 0.935}}')
     recs = [{**RECORDS[2], "tags": {"handradar.job_hash": "abc"}},
             {**RECORDS[0], "params": {**RECORDS[0]["params"], "synth.fitted.rcs_exponent": "0.1"}}]
-    assert fitted_effects(recs, tmp_path) == {1: ["seed 1: e 0.1; -"], 4: ["seed 1: e 0.25; sync_offset (offset_s 0.02)"]}
+    assert fitted_effects(recs, tmp_path) == {1: ["seed 1: e 0.1; -"],
+                                              4: ["seed 1: e 0.25; sync_offset (offset_s 0.02); SSIM 0.910 -> 0.935"]}
 
 
 def test_markdown_and_figure(tmp_path: Path):
