@@ -89,6 +89,10 @@ def test_tables_from_mlflow_runs(tmp_path: Path):
     ood = {"job": "variants", "split": {"kind": "ood", "ood": "angle"}}
     _log_run(uri, "ood_angle", ood, {"test/acc_model_synth": 0.42}, "o1", tmp=tmp_path)
     _log_run(uri, "unrelated", {"x": 1}, {"test/acc_radar_only": 0.99}, "u", tmp=tmp_path)  # not a handradar preset row
+    curve = {"job": "variants", "task_name": "data_efficiency", "seed": 1, "synth": {"fit_sim": "effects"},
+             "split": {"kind": "few_shot", "per_class": 1, "test": "fixed"}}
+    _log_run(uri, "data_efficiency", curve, {"test/acc_radar_only": 0.15, "test/acc_model_synth": 0.6}, "d1",
+             tmp=tmp_path)
 
     out = tmp_path / "results"
     md = tables.main(["--tracking-uri", uri, "--out", str(out), "--doc", str(tmp_path / "results.md")])
@@ -97,6 +101,8 @@ def test_tables_from_mlflow_runs(tmp_path: Path):
     assert "| 20 % | 0.467 ± 0.321 (n=3) |" in text
     assert "| angle (0° → ±30°) | – | 0.420 | – | – |" in text
     assert "Table III" not in text
+    # the data-efficiency runs again as the curve (the same runs as Table II's "1 per class*" row)
+    assert "## Data efficiency" in text and "| + synthetic (fitted simulator) | 0.600 |" in text
     assert (out / "table2_few_shot.csv").is_file() and (out / "table4_ood.csv").is_file()
     png = out / "confusion" / "few_shot_20pct_radar_only.png"
     assert png.stat().st_size > 1000
