@@ -363,7 +363,6 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
             "after_gap_closed": report["after"]["gap_closed"], "lead_ci95": report["evidence"].get("lead_ci95"),
             **kept_scores(report["after"]["effects"], case.truth),
             "recordings_needed": report["evidence"].get("recordings_needed"),
-            "leader_specificity": top.get("specificity") if top else None,
             "runner_up": report["evidence"].get("runner_up"), "rows": n_rows, "seconds": seconds,
             "folds": report["settings"]["folds"],  # as resolved (diagnose.folds = auto: by the rows)
             # step 0's generic settings and the mean SSIM of each grid point (not the effects' grids)

@@ -262,10 +262,6 @@ class Candidate:
     fold_params: list[dict[str, float]] = field(default_factory=list)  # with folds: each fold's fit (scores its rows)
     specificity: dict | None = None  # does its gain come where its physics acts (handradar.gap.specificity)
 
-    @property
-    def specific(self) -> bool:
-        return bool(self.specificity and self.specificity["specific"])
-
     def significant(self, min_gap_closed: float) -> bool:
         return significant(self.gap_closed, self.ci95, min_gap_closed)
 
