@@ -35,12 +35,13 @@ CURVES = {
     "synthetic only (paper's simulator)": ("test/acc_model_synth_only", False),
     "real pool (ceiling)": ("test/acc_radar_pool", None),
 }
+CEILING = "real pool (ceiling)"  # the pool's real rows do not depend on k: one value per seed, kept at 0
 
 
 def curves(records: Iterable[Mapping]) -> dict[str, dict[int, list[float]]]:
     """{curve: {rows per gesture: [accuracy per seed]}} of the data-efficiency runs among ``records``
     (``{"params": flat config, "metrics": {...}}``, latest first: one value per curve, point and seed,
-    the latest run's); the paper's simulator's points sit at 0 rows."""
+    the latest run's); the paper's simulator's points, and the ceiling's (one per seed), sit at 0."""
     out: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     seen: set[tuple] = set()
     for rec in records:
@@ -50,7 +51,7 @@ def curves(records: Iterable[Mapping]) -> dict[str, dict[int, list[float]]]:
         k = int(float(p["split.per_class"]))
         fitted = p.get("synth.fit_sim", "none") not in ("none", "None")
         for name, (metric, wants_fit) in CURVES.items():
-            point = 0 if wants_fit is False else k
+            point = 0 if wants_fit is False or name == CEILING else k
             if metric in m and (wants_fit is None or wants_fit == fitted) and (name, point, p.get("seed")) not in seen:
                 seen.add((name, point, p.get("seed")))
                 out[name][point].append(float(m[metric]))
@@ -95,13 +96,15 @@ def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None) -> d
 
 
 def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int, list[str]]) -> str:
-    sizes = sorted({k for points in data.values() for k in points})
+    sizes = sorted({k for name, points in data.items() if name != CEILING for k in points})
     lines = ["| real rows per gesture | " + " | ".join(str(k) for k in sizes) + " |",
              "|---|" + "---|" * len(sizes)]
     for name in CURVES:
-        if name in data:
+        if name in data and name != CEILING:
             cells = [mean_std(data[name][k]) if k in data[name] else "–" for k in sizes]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if CEILING in data:
+        lines += ["", f"The {CEILING}, trained on the pool's real rows whatever k: {mean_std(data[CEILING][0])}."]
     if effects:
         lines += ["", "| real rows per gesture | effects the fitted simulator kept |", "|---|---|"]
         lines += [f"| {k} | {'; '.join(v)} |" for k, v in effects.items()]
@@ -118,7 +121,7 @@ def plot(data: Mapping[str, Mapping[int, list[float]]], path: str | Path, *, cha
         xs = [k if k > 0 else zero_x for k in ks]
         m = [stats(points[k])[0] for k in ks]
         s = [stats(points[k])[1] if len(points[k]) > 1 else 0.0 for k in ks]
-        if name == "real pool (ceiling)":
+        if name == CEILING:
             mean = stats([v for k in ks for v in points[k]])[0]
             ax.axhline(mean, color="black", lw=1, ls=":", label=f"{name}: {mean:.3f}")
         elif ks == [0]:

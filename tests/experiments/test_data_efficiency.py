@@ -35,7 +35,7 @@ def test_curves_group_by_rows_and_simulator():
     assert got["+ synthetic (fitted simulator)"] == {1: [0.5, 0.6], 4: [0.7]}
     assert got["synthetic only (fitted simulator)"] == {1: [0.4, 0.5], 4: [0.6]}
     assert got["synthetic only (paper's simulator)"] == {0: [0.35, 0.45]}  # no real row involved
-    assert got["real pool (ceiling)"] == {1: [0.7, 0.7], 4: [0.7]}
+    assert got["real pool (ceiling)"] == {0: [0.7, 0.7]}  # one per seed, whatever k
     # an older run of the same point and seed (later in the list: records come latest first) is left out
     older = rec(1, 1, "effects", radar_only=0.9, model_synth=0.9)
     assert curves([*RECORDS, older])["radar only"] == {1: [0.2, 0.3], 4: [0.4]}
@@ -61,6 +61,7 @@ def test_markdown_and_figure(tmp_path: Path):
     assert "| real rows per gesture | 0 | 1 | 4 |" in md
     assert "| radar only | – | 0.250 ± 0.071 (n=2) | 0.400 |" in md
     assert "| synthetic only (paper's simulator) | 0.400 ± 0.071 (n=2) | – | – |" in md
+    assert "The real pool (ceiling), trained on the pool's real rows whatever k: 0.700 ± 0.000 (n=2)." in md
     assert plot(data, tmp_path / "f.png").read_bytes()[:4] == b"\x89PNG"
 
 
