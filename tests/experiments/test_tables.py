@@ -60,6 +60,11 @@ def test_build_tables_layout():
     assert sorted(fitted.sorted_rows()) == ["5 %*", "5 %* [fitted: effects, 2 draws]",
                                             "5 %* [fitted: effects, RadarWeightNet guarded, 2 folds]",
                                             "5 %* [fitted: effects]"]
+    # two jobs of the same row and seed (other variants: other job hashes): the latest, listed first, counts
+    twice = build_tables([{"params": {**_few(0.05, "fixed"), "seed": "1"}, "metrics": {"test/acc_radar_only": 0.3}},
+                          {"params": {**_few(0.05, "fixed"), "seed": "1"}, "metrics": {"test/acc_radar_only": 0.9}},
+                          {"params": {**_few(0.05, "fixed"), "seed": "2"}, "metrics": {"test/acc_radar_only": 0.5}}])[0]
+    assert "| 5 %* | 0.400 ± 0.141 (n=2) |" in twice.markdown()
     # one job's table (what train.py prints)
     assert job_table(_few(0.5), {"test/acc_radar_only": 0.9}).endswith("| 50 % | 0.900 | – | – | – | – | – | – |")
 
@@ -144,6 +149,10 @@ def test_results_markdown_names_command_commit_seeds_and_machine_of_every_row():
     # runs of one row at two commits stay apart: a figure is never credited to code that did not make it
     mixed = group_runs([provenance(_tags(1, "aaaaaaa1"), {}, ["seed=1"]), provenance(_tags(2, "bbbbbbb2"), {}, ["seed=2"])])
     assert [(g["commit"], g["seeds"]) for g in mixed] == [("aaaaaaa", ["1"]), ("bbbbbbb", ["2"])]
+    # where outputs and caches went is not part of a command (the job hash leaves paths out)
+    moved = group_runs([provenance(_tags(s, **{"handradar.command": f"python train.py paths.log_dir=/x/logs seed={s}"}),
+                                   {}) for s in (1, 2)])
+    assert [g["command"] for g in moved] == ["python train.py -m seed=1,2"]
     assert "(no finished train.py jobs found)" in results_markdown([], "x")
 
 

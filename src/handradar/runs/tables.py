@@ -133,7 +133,8 @@ def group_runs(sources: Sequence[Mapping]) -> list[dict]:
     groups: dict[tuple, dict] = {}
     for src in sources:
         words = shlex.split(src["command"])
-        base = [w for w in words if not w.startswith("seed=")]
+        # where outputs and caches go changes no result (the job hash leaves paths out): not part of the command
+        base = [w for w in words if not w.startswith(("seed=", "paths."))]
         key = (tuple(base), src["commit"], src["machine"], src.get("reconstructed", False))
         g = groups.setdefault(key, {"base": base, "commit": src["commit"], "machine": src["machine"], "seeds": [],
                                     "reconstructed": src.get("reconstructed", False)})
@@ -209,6 +210,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
     pre = Table("table3_pretrain", "Table III: accuracy with and without pre-training on external synthetic data",
                 ["from scratch", "pre-trained"])
     ood = Table("table4_ood", "Table IV: out-of-distribution accuracy", variant_cols)
+    seen: set[tuple] = set()  # (table, row, column, seed): records come latest first, the latest run counts
     for rec in records:
         p, metrics = rec["params"], rec["metrics"]
         kind = p.get("split.kind", "few_shot")
@@ -247,7 +249,9 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
         row, key = row + setting, (*key, setting)
         for variant, label in VARIANT_COLUMNS:
             value = metrics.get(f"test/acc_{variant}")
-            if value is not None:
+            cell = (table.name, row, label, p.get("seed"))
+            if value is not None and (p.get("seed") is None or cell not in seen):
+                seen.add(cell)
                 table.add(row, label, value, key, rec.get("provenance"))
     return [t for t in (synth, few, pre, ood) if t.rows]
 
