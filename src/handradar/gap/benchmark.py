@@ -66,7 +66,7 @@ from handradar.errors import HandradarError
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
 from handradar.gap.job import headline_metrics, write_outputs
-from handradar.gap.records import benchmark_record, found, record_name, wrong_cause
+from handradar.gap.records import benchmark_record, found, record_name, withheld, wrong_cause
 from handradar.gap.report import VERDICTS
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import code_version, config_hash, machine
@@ -215,7 +215,8 @@ def score(results: Sequence[Mapping]) -> dict:
     matrix = np.zeros((len(rows), len(labels)), dtype=int)
     for i, r in enumerate(results):
         matrix[i, labels.index(r["cause"])] = 1
-    effect_cases = [r for r in results if r["truth"] != "none" and "+" not in r["truth"]]
+    several = [r for r in results if len(withheld(r["truth"])) > 1]
+    effect_cases = [r for r in results if r["truth"] != "none" and len(withheld(r["truth"])) == 1]
     controls = [r for r in results if r["truth"] == "none"]
     closed = [r["true_gap_closed"] for r in effect_cases if r.get("true_gap_closed") is not None]
     return {"labels": labels, "cases": rows, "matrix": matrix.tolist(),
@@ -227,7 +228,7 @@ def score(results: Sequence[Mapping]) -> dict:
             "effects_found": sum(found(r) for r in effect_cases), "wrong_causes": sum(wrong_cause(r) for r in results),
             "several": [{k: r.get(k) for k in ("case", "after_effects", "kept_precision", "kept_recall",
                                                  "after_gap_closed", "reference_gap_closed")}
-                        for r in results if "+" in r["truth"]],
+                        for r in several],
             "mean_after_gap_closed": float(np.mean([r["after_gap_closed"] for r in effect_cases])) if effect_cases else None}
 
 
@@ -341,7 +342,7 @@ def always_present(world: Mapping) -> list[str]:
 def kept_scores(kept: Sequence[str], truth: str) -> dict:
     """Precision and recall of the effects the greedy selection kept against a case's withheld ones
     (precision None when nothing was kept)."""
-    truths, kept = set(truth.split("+")) - {"none"}, list(kept)
+    truths, kept = set(withheld(truth)) - {"none"}, list(kept)
     hits = len(truths.intersection(kept))
     return {"kept_precision": hits / len(kept) if kept else None,
             "kept_recall": hits / len(truths) if truths else None}
@@ -352,7 +353,7 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
     true = cands.get(case.truth)
     top = report["candidates"][0] if report["candidates"] else None
     return {"case": case.name, "truth": case.truth, "cause": report["cause"],
-            "correct": report["cause"] in case.truth.split("+"),
+            "correct": report["cause"] in withheld(case.truth),
             "top_candidate": top["effect"] if top else None, "top_gap_closed": top["gap_closed"] if top else None,
             "top_ci95": top["ci95"] if top else None,
             "true_gap_closed": None if true is None else true["gap_closed"],

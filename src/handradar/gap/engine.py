@@ -422,14 +422,14 @@ class VariantEngine:
         keys = [self.cache.key(sim) for sim in sims]
         if not keys:
             return self._simulate(variants, sims, idx, progress, on_base)
-        need = [j for j, k in enumerate(keys) if len(self.cache.missing(k, idx))]
-        todo = idx if on_base is not None else np.unique(np.concatenate([self.cache.missing(keys[j], idx) for j in need]
-                                                                         or [idx[:0]]))
+        missing = {j: m for j, k in enumerate(keys) if len(m := self.cache.missing(k, idx))}
+        need = list(missing)
+        todo = idx if on_base is not None else np.unique(np.concatenate(list(missing.values()) or [idx[:0]]))
         if len(todo):
             # a cached variant is not simulated again (its rows are cached); a needed one on every row of todo
             specs = self._simulate([variants[j] for j in need], [sims[j] for j in need], todo, progress, on_base)
             for j, spec in zip(need, specs):
-                fresh = np.isin(todo, self.cache.missing(keys[j], todo))
+                fresh = np.isin(todo, missing[j])
                 self.cache.put(keys[j], todo[fresh], spec[fresh])
         if progress is not None and len(todo) < len(idx):
             progress(len(idx) - len(todo))

@@ -11,7 +11,7 @@ Public API:
     benchmark_record(results, scores, settings, *, world, size, world_version, machine, command) -> dict
     record_name(record) -> str                 (``<world>_<size>.json``)
     validate_record(record, where) -> dict     (FormatError naming ``where`` and the missing key)
-    found(case) -> bool; wrong_cause(case) -> bool   (how a case's answer is judged)
+    withheld(truth) -> [effect]; found(case) -> bool; wrong_cause(case) -> bool   (how a case's answer is judged)
     load_records(folder) -> list[dict]         (every *.json, validated, in table order)
     summary_markdown(records, source) -> str   (the summary table, its legend once, the provenance)
 """
@@ -41,13 +41,18 @@ CASE_KEYS = ("case", "truth", "cause", "correct", "recordings_needed", "true_gap
 MUST_NOT_MISLEAD = frozenset({"palm"})
 
 
+def withheld(truth: str) -> list[str]:
+    """The effects a case's ``truth`` names: one, or several joined by "+" ("none" for a control)."""
+    return truth.split("+")
+
+
 def found(case: Mapping) -> bool:
     """The case's answer counts as found: the true effect named, or leading an "inconclusive" verdict; for an
     effect in MUST_NOT_MISLEAD also "none", or "inconclusive" with no other effect kept by the greedy
     selection (a record without ``after_effects`` cannot show that). A control is found when it says "none".
     Where effects are present in every case (``also_present``: a world's Leap jitter floor), naming them is
     right too, and the withheld effect is also found when the greedy selection keeps it."""
-    truth, cause, truths = case["truth"], case["cause"], case["truth"].split("+")
+    truth, cause, truths = case["truth"], case["cause"], withheld(case["truth"])
     present, kept = set(case.get("also_present") or []), case.get("after_effects")
     if truth == "none":
         return cause == "none" or cause in present
@@ -63,7 +68,7 @@ def found(case: Mapping) -> bool:
 def wrong_cause(case: Mapping) -> bool:
     """The worst answer: an effect named that is neither withheld nor present in every case (any other effect,
     for a control)."""
-    return (case["cause"] not in VERDICTS and case["cause"] not in case["truth"].split("+")
+    return (case["cause"] not in VERDICTS and case["cause"] not in withheld(case["truth"])
             and case["cause"] not in (case.get("also_present") or []))
 REQUIRED = ("format", "world", "size", "world_version", "command", "commit", "seeds", "machine", "scores", "cases")
 
