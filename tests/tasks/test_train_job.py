@@ -201,3 +201,43 @@ def test_custom_job_kind(fake_data: Path, tmp_path: Path):
     assert metrics["test/n_rows"] == 80.0 and 0 < metrics["test/ssim_model"] < 1
     with pytest.raises(ValueError, match="job must be"):
         run(compose_train(["job=nonsense", *fake_overrides(fake_data, tmp_path)]), run_dir=tmp_path / "run2")
+
+
+def test_external_pretrain_fits_on_rows_that_train_every_finetune(fake_data: Path, tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch):
+    """The closed loop in Table III: the simulator is fitted on the smallest fraction's rows, which lie in
+    every fine-tune's training rows (never in a test set), and the external provider simulates with it."""
+    from handradar.tasks.train import Job
+
+    fitted_on, finetunes, provider_sims = [], {}, []
+    fitted = {"rcs_exponent": 0.5, "effects": ["tracking_jitter"], "effect_params": {"tracking_jitter": {}}}
+
+    def fitted_sim(self, split):
+        fitted_on.append(split.train)
+        return fitted
+
+    def provider(source_cfg, *, seed, cache_dir, sim=None):
+        provider_sims.append(sim)
+        return fakes.fake_external_provider(source_cfg, seed=seed, cache_dir=cache_dir)
+
+    original = Job.train_and_test
+
+    def train_and_test(self, name, sources, test, *args, **kwargs):
+        finetunes[name] = (sources[0].rows, np.asarray(test))
+        return original(self, name, sources, test, *args, **kwargs)
+
+    monkeypatch.setattr(Job, "fitted_sim", fitted_sim)
+    monkeypatch.setattr(Job, "train_and_test", train_and_test)
+    monkeypatch.setattr(fakes, "fitted_external_provider", provider, raising=False)
+    cfg = compose_train(["+experiment=external_pretrain", *fake_overrides(fake_data, tmp_path),
+                         "synth.external_provider._target_=tests.tasks.fakes.fitted_external_provider",
+                         "pretrain.max_steps=5", "trainer.max_steps=2"])
+    run(cfg, run_dir=tmp_path / "run")
+    assert provider_sims == [fitted]
+    (fit_rows,) = fitted_on
+    assert len(finetunes) == 8
+    for name, (train, test) in finetunes.items():  # a fit row of a fine-tune's classes trains it
+        assert not np.intersect1d(fit_rows, test).size, name
+    assert np.isin(fit_rows, finetunes["scratch_10c_5pct"][0]).all()
+    assert np.isin(finetunes["scratch_10c_5pct"][0], finetunes["scratch_10c_10pct"][0]).all()  # nested fractions
+    assert np.isin(finetunes["scratch_5c_5pct"][0], finetunes["scratch_10c_5pct"][0]).all()  # nested subsets

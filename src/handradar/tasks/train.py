@@ -18,8 +18,10 @@ spectrograms alone (train on synthetic, test on real) and ``radar_pool`` on the 
 spectrograms (their upper reference). The simulator behind the synthetic variants is fitted on the
 split's real training rows first (``synth.fit_sim``, the closed loop: :meth:`Job.fitted_sim` through
 handradar.gap.job.fit_simulator), optionally drawn ``synth.samples_per_row`` times around its fitted
-nuisance parameters (``synth.randomize``, :func:`nuisance_draw`). ``external_pretrain`` pre-trains on ``synth.external_provider`` data and fine-tunes on
-few-shot fractions of class subsets, against the same training from scratch. Any other job kind is
+nuisance parameters (``synth.randomize``, :func:`nuisance_draw`). ``external_pretrain`` pre-trains on
+``synth.external_provider`` data, simulated with the simulator fitted on the smallest fraction's rows,
+and fine-tunes on few-shot fractions of class subsets, against the same training from scratch; one
+split per fraction, restricted to each subset's classes, so the fit's rows train every fine-tune. Any other job kind is
 a dotted function name ``fn(job: Job) -> {metric name: number}`` (e.g. a synthesis-fit job): it gets
 the loaded real data (``job.real``), the state folder (``job.state``, for resumable work), the
 tracker and ``job.cfg``, and its metrics go to metrics.json and MLflow like the built-in kinds.
@@ -492,13 +494,23 @@ class Job:
             return "dhg", dhg
         return "sfinge3d", data.sfinge3d
 
+    def finetune_split(self, fraction: float) -> Split:
+        """The few-shot split of every class at ``fraction`` (the unstarred protocol); a class subset's
+        fine-tune takes its classes' rows of it, so one seed's splits are nested across fractions and
+        subsets, and the smallest fraction's rows, which fit the simulator, train every fine-tune."""
+        return few_shot_split(self.real.y, float(fraction), seed=self.seed, test="remainder")
+
     def pretrained_backbone(self) -> dict[str, torch.Tensor]:
         f = self.state / "pretrain" / "backbone.pt"
         if f.is_file():
             return torch.load(f, map_location="cpu")
         source, source_cfg = self.external_source()
         provider = instantiate(self.cfg.synth.external_provider)
-        ext = load_arrays(provider(source_cfg, seed=self.seed, cache_dir=Path(self.cfg.synth.cache_dir)))
+        # the closed loop: the radar's calibration and the Leap tracker's smoothing, fitted on the rows that
+        # train every fine-tune (the smallest fraction's), carry over to the external skeletons
+        fitted = self.fitted_sim(self.finetune_split(min(self.cfg.finetune.fractions)))
+        extra = {} if fitted is None else {"sim": fitted}
+        ext = load_arrays(provider(source_cfg, seed=self.seed, cache_dir=Path(self.cfg.synth.cache_dir), **extra))
         if ext.x.shape[1:] != self.real.x.shape[1:]:
             raise ValueError(f"external spectrograms {ext.x.shape[1:]} differ from the radar data's {self.real.x.shape[1:]}")
         net = self.fit_classifier("pretrain", [FileRows(ext.path)], len(ext.classes),
@@ -521,16 +533,16 @@ class Job:
                 raise ValueError(f"finetune.class_subsets names {unknown}, not classes of {real.path} ({real.classes})")
             ids = [real.classes.index(n) for n in names]
             rows = np.flatnonzero(np.isin(real.y, ids))
-            remap = {c: i for i, c in enumerate(ids)}
-            y_sub = np.asarray([remap[int(c)] for c in real.y[rows]], dtype=np.int64)
+            remap = np.full(len(real.classes), -1, dtype=np.int64)
+            remap[ids] = np.arange(len(ids))
             for fraction in self.cfg.finetune.fractions:
-                sub = few_shot_split(y_sub, float(fraction), seed=self.seed, test="remainder")
-                train, test = rows[sub.train], rows[sub.test]
+                split = self.finetune_split(fraction)
+                train, test = np.intersect1d(split.train, rows), np.intersect1d(split.test, rows)
                 for init in ("scratch", "pretrained"):
                     name = f"{init}_{len(ids)}c_{float(fraction) * 100:g}pct"
 
                     def compute(init: str = init, train: np.ndarray = train, test: np.ndarray = test,
-                                ytr: np.ndarray = y_sub[sub.train], yte: np.ndarray = y_sub[sub.test]) -> dict:
+                                ytr: np.ndarray = remap[real.y[train]], yte: np.ndarray = remap[real.y[test]]) -> dict:
                         nonlocal backbone
                         if init == "pretrained" and backbone is None:
                             backbone = self.pretrained_backbone()
