@@ -59,9 +59,17 @@ def test_default_size_is_240_and_the_golden_file_tells_the_sizes_apart():
 
 
 def test_a_size_the_preset_does_not_define_is_a_one_line_error():
-    with pytest.raises(HandradarError, match=r"benchmark.size=100: not one of the sizes in benchmark.sizes \(240, 36\)"):
+    with pytest.raises(HandradarError, match=r"benchmark.size=100: not one of the sizes in benchmark.sizes \(720, 240, 36\)"):
         benchmark_world(_compose(["benchmark.size=100"]))
     # a world override that breaks the size's count is named, not run under the wrong label
     with pytest.raises(HandradarError, match=r"benchmark.size=36: the world settings give 48 recordings per case"):
         benchmark_world(_compose(["benchmark.size=36", "+benchmark.world.subjects=2", "+benchmark.world.repetitions=2",
                                   "+benchmark.world.angles_deg=[0.0,30.0]"]))
+
+
+@pytest.mark.parametrize("world", ["default", "heldout", "heldout2", "heldout3", "scatterers"])
+def test_size_720_is_every_world_at_its_own_size(world: str):
+    from handradar.world import world_config
+
+    w = world_config(benchmark_world(_compose([f"world={world}", "benchmark.size=720"])))
+    assert (len(w.gestures), w.subjects, len(w.angles_deg), w.repetitions) == (10, 8, 3, 3)
