@@ -33,9 +33,7 @@ from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import REPO_ROOT, code_version, machine
 
 # each opt-in setting with the values its documentation suggests (conf/diagnose.yaml)
-SETTINGS: dict[str, list[float]] = {"bone_extents": [0.0, 0.5, 1.0],
-                                    "doppler_spreads": [0.0, 0.5, 1.0, 2.0],
-                                    "metacarpal_gains": [1.0, 0.75, 0.5, 0.25, 0.0],
+SETTINGS: dict[str, list[float]] = {"metacarpal_gains": [1.0, 0.75, 0.5, 0.25, 0.0],
                                     "coherences": [1.0, 0.5, 0.0]}
 PRESET = ["+experiment=gap_benchmark"]
 

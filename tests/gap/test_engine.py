@@ -60,7 +60,7 @@ def test_constant_ratio_and_slot_weights():
 
 
 def test_variant_factories_share_the_base_where_their_settings_allow(radar, short_chain):
-    """A variant with its own generic settings: a Doppler spread or a coherence re-uses the base's signal, a metacarpal
+    """A variant with its own generic settings: a coherence re-uses the base's signal, a metacarpal
     gain re-weights its slot profiles, an RCS exponent (read by the effects from the context) is
     simulated in full; each gives the simulator's own spectrogram, also across a tracking dropout
     inside the window (the points reflect nothing there; the weights are interpolated in between)."""
@@ -68,12 +68,11 @@ def test_variant_factories_share_the_base_where_their_settings_allow(radar, shor
     rs.masks[:, 20:23] = False
     build = builder(radar, short_chain)
     base = {"forearm": {"length_m": 0.1}}
-    settings = [{"doppler_spread": 2.0}, {"coherence": 0.5}, {"metacarpal_gain": 0.5}, {"metacarpal_gain": 0.0},
-                {"rcs_exponent": 0.5}, {"bone_extent": 1.0}]
+    settings = [{"coherence": 0.5}, {"metacarpal_gain": 0.5}, {"metacarpal_gain": 0.0}, {"rcs_exponent": 0.5}]
     engine = VariantEngine(build, base, rs, batch_size=2)
     factories = [build.replace(**s) for s in settings]
     out = engine.spectrograms([{}] * len(settings), factories=factories)
-    assert engine.paths == {("settings", "signal"): 2, ("settings", "reweighted"): 2, ("settings", "full"): 2}
+    assert engine.paths == {("settings", "signal"): 1, ("settings", "reweighted"): 2, ("settings", "full"): 1}
     for s, f, spec in zip(settings, factories, out):
         with torch.no_grad():
             ref = f(base)(torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks),
@@ -89,11 +88,10 @@ def test_step_0_scores_every_grid_point_as_its_own_simulator_would(radar, short_
     rs, _, _ = rows(radar, short_chain, 4, seed=2)
     build = builder(radar, short_chain)
     measured = simulate(radar, short_chain, rs, {})
-    grid = generic_grid({"rcs_exponents": [1.0, 0.25], "metacarpal_gains": [1.0, 0.5], "doppler_spreads": [0.0, 1.0],
-                         "coherences": [1.0, 0.0]})
+    grid = generic_grid({"rcs_exponents": [1.0, 0.25], "metacarpal_gains": [1.0, 0.5], "coherences": [1.0, 0.0]})
     best, scores = calibrate_settings(build, {}, rs, np.arange(4), measured, grid, batch_size=4)
-    assert best == {"rcs_exponent": 1.0, "doppler_spread": 0.0, "metacarpal_gain": 1.0, "coherence": 1.0}
-    assert len(scores) == 16
+    assert best == {"rcs_exponent": 1.0, "metacarpal_gain": 1.0, "coherence": 1.0}
+    assert len(scores) == 8
     for point, score in zip(grid, scores):
         with torch.no_grad():
             spec = build.replace(**point)()(torch.as_tensor(rs.skeletons), torch.as_tensor(rs.masks),

@@ -26,7 +26,6 @@ from handradar.sim.scatterers import (
     METACARPAL_SLOTS,
     N_SLOTS,
     Scatterers,
-    bone_scatterers,
     radar_amplitude,
 )
 from handradar.sim.simulator import Simulator
@@ -245,31 +244,10 @@ def test_tracking_gap_neither_sweeps_through_the_origin_nor_reflects(radar, shor
     assert inside.any() and float(flat[:, torch.as_tensor(inside)].abs().max()) == 0.0
 
 
-def test_bone_extent_splits_each_bone_into_three_points_that_sum_to_its_centre():
-    h = torch.as_tensor(standard_hand(), dtype=torch.float64) + torch.tensor([0.0, 0.0, 0.3], dtype=torch.float64)
-    joints = torch.stack([h, h + 0.1]).reshape(1, 1, 2, 21, 3)
-    mask = torch.ones(1, 1, 2, dtype=torch.bool)
-    radii = torch.full((19,), 0.008, dtype=torch.float64)
-    one = bone_scatterers(joints, mask, 0.0039, radii)
-    spread = bone_scatterers(joints, mask, 0.0039, radii, extent=0.6)
-    assert one.n_points == 38 and spread.n_points == 3 * 38
-    assert torch.equal(spread.owner, torch.arange(38).repeat(3))  # midpoints first: slots 0..37
-    torch.testing.assert_close(spread.tx[:, :, :38], one.tx)
-    axis = (joints[..., BONE_CHILD, :] - joints[..., BONE_PARENT, :]).reshape(1, 1, 38, 3)
-    torch.testing.assert_close(spread.tx[:, :, 38:76], one.tx - 0.2 * axis)  # -+ e L / 3 along the bone
-    torch.testing.assert_close(spread.tx[:, :, 76:], one.tx + 0.2 * axis)
-    # a third of the amplitude each: three in phase sum to the single centre's amplitude
-    torch.testing.assert_close(3 * spread.rcs_m2[:, :, :38].sqrt(), one.rcs_m2.sqrt())
-    assert torch.equal(bone_scatterers(joints, mask, 0.0039, radii, extent=0.0).tx, one.tx)
-    with pytest.raises(ValueError, match="bone extent must be in"):
-        bone_scatterers(joints, mask, 0.0039, radii, extent=1.5)
-
-
-@pytest.mark.parametrize("extent", [0.0, 1.0])
-def test_rotating_bone_doppler_lines_at_the_closed_form_rows_of_its_points(radar, short_chain, extent):
+def test_rotating_bone_doppler_line_at_the_closed_form_row_of_its_midpoint(radar, short_chain):
     # the middle finger's proximal bone (8) turns at omega about its parent joint, broadside to the radar
     # (bone along x, line of sight along z) at the first STFT column's centre; the point at distance s
-    # from the joint moves away at s omega cos(phi), so each of its points draws its own Doppler line
+    # from the joint moves away at s omega cos(phi), so its midpoint (s = L / 2) draws one Doppler line
     bone, omega, z0 = 8, 20.0, 0.3
     times = _steps(radar, short_chain)
     h = standard_hand().astype(np.float64)
@@ -290,35 +268,12 @@ def test_rotating_bone_doppler_lines_at_the_closed_form_rows_of_its_points(radar
     mask[..., 0] = True
     w = torch.zeros(1, len(times), 38)
     w[..., bone] = 1.0
-    sim = Simulator(radar, short_chain, bone_extent=extent)
+    sim = Simulator(radar, short_chain)
     column = sim(torch.as_tensor(pos[None], dtype=torch.float32), torch.as_tensor(mask), w)[0, :, 0].numpy()
-    offsets = [0.0] if extent == 0 else [0.0, -extent / 3, extent / 3]
     rows_per_mps = short_chain.stft_len * radar.loop_period_s * 2 / radar.wavelength_m
-    expected = sorted(round(-(0.5 + o) * length * omega * rows_per_mps) + short_chain.stft_len // 2 for o in offsets)
+    expected = [round(-0.5 * length * omega * rows_per_mps) + short_chain.stft_len // 2]
     peaks = [r for r in range(1, len(column) - 1) if column[r] >= max(column[r - 1], column[r + 1]) and column[r] > 0.8]
     assert peaks == expected
-
-
-def test_doppler_spread_adds_its_variance_and_keeps_the_power():
-    """spread_doppler: a Gaussian line of std s0 rows becomes one of std sqrt(s0^2 + sigma^2) (variances
-    add under convolution), centred where it was, with the same total power per column; a line across
-    the wrap-around (row 0) spreads to both ends; sigma = 0 is the identity."""
-    from handradar.sim.simulator import spread_doppler
-
-    n, s0, sigma, centre = 64, 2.0, 3.0, 40.0
-    rows = torch.arange(n, dtype=torch.float64)
-    line = torch.exp(-0.5 * ((rows - centre) / s0) ** 2)[None, :, None].expand(2, n, 5).clone()  # (B, doppler, columns)
-    out = spread_doppler(line, sigma)
-    torch.testing.assert_close(out.sum(-2), line.sum(-2))
-    p = out[0, :, 0] / out[0, :, 0].sum()
-    mean = float((p * rows).sum())
-    var = float((p * (rows - mean) ** 2).sum())
-    assert mean == pytest.approx(centre, abs=1e-6) and var == pytest.approx(s0**2 + sigma**2, rel=1e-3)
-    delta = torch.zeros(1, n, 1, dtype=torch.float64)
-    delta[0, 0, 0] = 1.0
-    wrapped = spread_doppler(delta, 2.0)[0, :, 0]
-    torch.testing.assert_close(wrapped[1:4], wrapped.flip(0)[:3])  # symmetric about row 0 across the wrap
-    assert spread_doppler(line, 0.0) is line
 
 
 def window_times(radar, chain) -> np.ndarray:
@@ -345,18 +300,6 @@ def test_metacarpal_gain_scales_the_metacarpals_only_and_is_validated_and_keyed(
     assert [BONE_NAMES[int(k) % 19] for k in METACARPAL_SLOTS[:4]] == [f"{f}_metacarpal" for f in ("index", "middle", "ring", "pinky")]
     torch.testing.assert_close(b.gain[..., meta], 0.5 * a.gain[..., meta])
     torch.testing.assert_close(b.gain[..., ~meta], a.gain[..., ~meta])
-
-
-def test_simulator_doppler_spread_is_validated_keyed_and_widens_a_moving_hand(radar, short_chain):
-    assert_setting_checked_and_keyed(radar, short_chain, "doppler_spread", -1.0, 1.5)
-    t = window_times(radar, short_chain)
-    pos, mask = window(t, hands=1, seed=3)
-    sk, mk = torch.as_tensor(pos[None]), torch.as_tensor(mask[None])
-
-    def occupied_rows(spread: float) -> float:  # rows above half the [0, 1] scale, mean over columns
-        return float((Simulator(radar, short_chain, doppler_spread=spread)(sk, mk)[0] > 0.5).sum(0).float().mean())
-
-    assert occupied_rows(3.0) > occupied_rows(0.0)
 
 
 def test_coherence_is_the_expected_power_over_unknown_slot_phases(radar, short_chain):

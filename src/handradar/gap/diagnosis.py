@@ -5,9 +5,9 @@ Given measured rows (spectrograms + skeleton windows) and a baseline simulator (
 1. split the rows, seeded and stratified by gesture, into a calibration and an evaluation split;
    calibrate the baseline: the aspect exponent of its cylinder RCS (handradar.sim.rcs; 1 = the
    paper's formula) that fits the calibration split best (``rcs_exponents``), jointly with the
-   bones' extent along their length (``bone_extents``; handradar.sim.scatterers) and a Gaussian spread
-   of the power along Doppler (``doppler_spreads``; Simulator.spread_doppler), each off by default
-   (the paper's one centre per bone, no spread; gap.report.GENERIC_SETTINGS). This generic
+   metacarpals' amplitude (``metacarpal_gains``) and the share of the bones' cross terms kept in the
+   power (``coherences``; Simulator.coherence), each off by default (the paper's cylinders and
+   coherent sum; gap.report.GENERIC_SETTINGS). This generic
    calibration comes first so that candidates are scored on the gap it leaves: without it, any
    candidate that adds slow, broad returns (a palm disc, radar-table image paths) closes part of the generic
    "the cylinders are too specular" gap in every data set and wins where its effect is absent.
@@ -133,8 +133,6 @@ class DiagnosisConfig:
     candidates: list[str] | None = None  # None: every effect not in the baseline simulator
     rcs_exponents: list[float] | None = field(default_factory=lambda: [1.0, 0.75, 0.5, 0.25, 0.1, 0.0])
     # the baseline's cylinder RCS aspect exponents tried (None or [1.0]: the paper's RCS, uncalibrated)
-    bone_extents: list[float] | None = None  # with each exponent (None or [0.0]: one centre per bone, not fitted)
-    doppler_spreads: list[float] | None = None  # ... and each Doppler spread, rows (None or [0.0]: none, not fitted)
     metacarpal_gains: list[float] | None = None  # ... and each metacarpal amplitude factor (None or [1.0]: not fitted)
     coherences: list[float] | None = None  # ... and each share of the bones' cross terms (None or [1.0]: not fitted)
     grids: dict[str, dict[str, list[float]]] | None = None  # {effect: {param: values}} replacing documented grids
@@ -582,8 +580,8 @@ class _Steps:
                         "(use 30 or more)", len(self.ev))
 
     def calibrate_fold(self, fold: Fold) -> None:
-        """Step 0 on one fold's fitting rows: the generic settings (RCS exponent, bone extent, Doppler
-        spread), then the baseline's own effects given them."""
+        """Step 0 on one fold's fitting rows: the generic settings (RCS exponent, metacarpal gain,
+        coherence), then the baseline's own effects given them."""
         cfg, d = self.cfg, self.data
         build, calibration = self.build, {"rcs_exponent": 1.0, "grid": []}
         if len(self.generic_grid) > 1 or self.generic_grid[0] != {"rcs_exponent": 1.0}:
@@ -720,8 +718,8 @@ class _Steps:
                        "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
                                     "folds": cfg.folds, "fit_rows": int(len(self.folds[-1].fit_idx)),
                                     "refine_steps": cfg.refine_steps, "rcs_exponents": list(cfg.rcs_exponents or [1.0]),
-                                    **{name: getattr(cfg, name) for name in GENERIC_SETTINGS
-                                       if name != "rcs_exponents" and getattr(cfg, name) not in (None, [0.0])},
+                                    **{name: getattr(cfg, name) for name, (_, paper, _) in GENERIC_SETTINGS.items()
+                                       if name != "rcs_exponents" and getattr(cfg, name) not in (None, [paper])},
                                     "grids": cfg.grids or {}, "n_boot": cfg.n_boot,
                                     "min_gap_closed": cfg.min_gap_closed}}
 

@@ -21,8 +21,8 @@ computed once; then each variant takes the cheapest path that gives its signal:
 
 A variant may also come with its own factory (``factories``), whose generic settings differ from
 the base's (step 0's grid, handradar.gap.fit.calibrate_settings). A setting of the signal's last
-step (``doppler_spread``, ``coherence``) keeps the shortcuts above; one that changes the reflection points only
-(``metacarpal_gain``, ``bone_extent``) takes the scatterer-stage path, whose checks find the
+step (``coherence``) keeps the shortcuts above; one that changes the reflection points only
+(``metacarpal_gain``) takes the scatterer-stage path, whose checks find the
 re-weighting (the metacarpals' amplitude) or fall back to the full simulation (points that move);
 any other (``rcs_exponent``, which the effects read from the context) takes the full simulation.
 
@@ -96,8 +96,8 @@ def merge(base: Variant, added: Variant) -> dict[str, dict[str, float]]:
 
 # Simulator settings (Simulator.key()) that a variant's factory may change and still share the base's
 # work: applied after the summed signal, or to the reflection points only (module doc)
-SIGNAL_SETTINGS = frozenset({"doppler_spread", "coherence"})
-SCATTERER_SETTINGS = frozenset({"metacarpal_gain", "bone_extent"})
+SIGNAL_SETTINGS = frozenset({"coherence"})
+SCATTERER_SETTINGS = frozenset({"metacarpal_gain"})
 
 
 def settings_path(sim: Simulator, base: Simulator) -> str:

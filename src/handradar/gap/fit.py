@@ -93,12 +93,12 @@ def calibrate_settings(build: SimFactory, base: Mapping, rows: RowSet, idx: np.n
                        grid: Sequence[Mapping[str, float]], *, batch_size: int = 8,
                        progress: Callable[[int], None] | None = None,
                        cache: SpectrogramCache | None = None) -> tuple[dict[str, float], list[float]]:
-    """The generic simulator settings (of ``grid``: e.g. ``{"rcs_exponent": 0.5, "bone_extent": 1.0}``
+    """The generic simulator settings (of ``grid``: e.g. ``{"rcs_exponent": 0.5, "metacarpal_gain": 0.5}``
     per point) under which the baseline simulator scores the highest mean SSIM on rows ``idx``, and the
     score of each point (ties: the first).
 
     One pass over the rows per RCS exponent: the points that share it are variants of one engine,
-    so a metacarpal gain re-weights that pass's slot profiles and a Doppler spread re-uses its signal
+    so a metacarpal gain re-weights that pass's slot profiles and a coherence re-uses its signal
     (handradar.gap.engine, ``factories``) instead of simulating again."""
     target = torch.as_tensor(measured[idx])
     scores = [float("nan")] * len(grid)

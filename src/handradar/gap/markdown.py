@@ -12,14 +12,12 @@ def _params(p: dict) -> str:
 
 
 # step 0's generic settings beside the exponent: (grid axis name, the fitted value as a clause, the paper's value)
-_GENERIC_TEXT = {"bone_extent": ("extent", "the bones' extent to {:g} of their length", 0),
-                 "doppler_spread": ("spread", "a Doppler spread of {:g} rows", 0),
-                 "metacarpal_gain": ("metacarpal", "the metacarpals' amplitude to {:g}", 1),
+_GENERIC_TEXT = {"metacarpal_gain": ("metacarpal", "the metacarpals' amplitude to {:g}", 1),
                  "coherence": ("coherence", "the bones' cross terms kept at {:g}", 1)}
 
 
 def _calibration(cal: dict | None) -> str:
-    """Step 0 (the RCS exponent, the bones' extent and Doppler spread if fitted, the baseline's own effects),
+    """Step 0 (the RCS exponent, the metacarpal gain and coherence if fitted, the baseline's own effects),
     as a clause of the baseline line."""
     cal = cal or {}
     if not cal.get("grid"):

@@ -15,8 +15,6 @@ from handradar.atomic import atomic_write_text
 # A setting whose list is only the paper's value is not fitted; the report's calibration holds the
 # fitted ones, which fitted_simulator (below) writes back as ``sim`` settings.
 GENERIC_SETTINGS: dict[str, tuple[str, float, float]] = {"rcs_exponents": ("rcs_exponent", 1.0, 1.0),
-                                                         "bone_extents": ("bone_extent", 0.0, 1.0),
-                                                         "doppler_spreads": ("doppler_spread", 0.0, 16.0),
                                                          "metacarpal_gains": ("metacarpal_gain", 1.0, 1.0),
                                                          "coherences": ("coherence", 1.0, 1.0)}
 

@@ -1,7 +1,7 @@
 """The one place simulators are built: :class:`SimFactory`, from the ``sim`` config.
 
-Every setting (the hand model, the skeleton rate, amplitudes, the cylinder RCS aspect exponent, the
-bones' extent, the effects with their parameters, the draws a noise effect averages) is fixed when a simulator is
+Every setting (the hand model, the skeleton rate, amplitudes, the cylinder RCS aspect exponent,
+the effects with their parameters, the draws a noise effect averages) is fixed when a simulator is
 constructed; nothing mutates a built simulator. A variant with other settings is a new factory
 (:meth:`SimFactory.replace`), so every simulator passes the constructor's checks and its
 :meth:`~handradar.sim.simulator.Simulator.key` (which the caches use) says what it is.
@@ -29,11 +29,20 @@ from handradar.sim.simulator import Simulator
 # Effects with their parameters: {effect name: {parameter: value}} (also the gap diagnosis's variants).
 EffectSet = Mapping[str, Mapping[str, Any]]
 
-SETTINGS = ("hand", "skeleton_rate_hz", "tx_power_w", "gain_tx_dbi", "gain_rx_dbi", "rcs_exponent", "bone_extent",
-            "doppler_spread", "metacarpal_gain", "coherence", "compile_combine")
+SETTINGS = ("hand", "skeleton_rate_hz", "tx_power_w", "gain_tx_dbi", "gain_rx_dbi", "rcs_exponent",
+            "metacarpal_gain", "coherence", "compile_combine")
+# settings judged and removed (docs/gap_validation.md), with their off value: a fitted_sim.yaml or a job
+# state written before their removal still holds them at it, and reads as it did
+REMOVED = {"bone_extent": 0.0, "doppler_spread": 0.0}
 # keys of a sim config that are not settings: Hydra's, and the two that become ``effects``
 _NOT_SETTINGS = {"_target_", "_partial_", "_recursive_", "_convert_", "effects", "effect_params", "noise_draws",
                  "from_report"}
+
+
+def without_removed(settings: Mapping[str, Any]) -> dict[str, Any]:
+    """``settings`` without the REMOVED ones at their off value (another value stays, and is refused
+    as unknown by the caller)."""
+    return {k: v for k, v in settings.items() if not (k in REMOVED and v is not None and float(v) == REMOVED[k])}
 
 
 def _read_fitted(path: Path) -> dict[str, Any]:
@@ -46,6 +55,7 @@ def _read_fitted(path: Path) -> dict[str, Any]:
         raise FormatError(path, f"not a readable YAML file ({exc})") from None
     if not isinstance(fitted, dict) or not isinstance(fitted.get("effects", []), list):
         raise FormatError(path, "expected a mapping of simulator settings with an 'effects' list")
+    fitted = without_removed(fitted)
     unknown = set(fitted) - set(SETTINGS) - {"effects", "effect_params"}
     if unknown:
         raise FormatError(path, f"unknown simulator setting(s) {sorted(unknown)}; expected some of "
@@ -64,6 +74,7 @@ class SimFactory:
 
     def __init__(self, radar: RadarConfig, chain: ChainConfig, *, effects: EffectSet | None = None,
                  noise_draws: int = 1, **settings: Any) -> None:
+        settings = without_removed(settings)
         unknown = set(settings) - set(SETTINGS)
         if unknown:
             raise ValueError(f"unknown simulator setting(s) {sorted(unknown)}; expected some of {list(SETTINGS)}")

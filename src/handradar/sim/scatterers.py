@@ -8,15 +8,6 @@ coefficients multiply in here); and an ``owner`` slot: 0..37 for the bone (hand 
 whose RadarWeightNet weight scales it, -1 for extra reflectors that no weight scales (palm,
 forearm).
 
-Extent along the bone (``extent`` e in [0, 1], 0 = the paper's single centre): a real finger
-reflects from along its length, so a bone that rotates returns a spread of Doppler (the points
-nearer its tip move faster), which one centre at the midpoint cannot. With e > 0 each bone has
-three points, at the midpoint and at -+ e L / 3 along its axis (the centres of the thirds of a
-segment e L long around the midpoint), each with a third of the bone's amplitude (RCS / 9): their
-coherent sum at equal ranges is the single centre's, so e -> 0 is continuous and e = 0 is exactly
-the paper's model. Point order: the 38 midpoints first (slots 0..37), then the 38 points at
--e L / 3, then those at +e L / 3, each owned by its bone's slot.
-
 Amplitude (radar equation, bistatic form, sqrt of received power for unit transmit amplitude):
 
     A = lambda sqrt(Gt Gr P sigma) / ((4 pi)^1.5 R_tx R_rx)      (= ... / R^2 for a direct path)
@@ -24,11 +15,9 @@ Amplitude (radar equation, bistatic form, sqrt of received power for unit transm
 Public API (torch, differentiable):
 
     bone_geometry(joints (..., 21, 3)) -> (midpoint (..., 19, 3), axis vector (..., 19, 3), length (..., 19))
-    bone_scatterers(joints (B, T, 2, 21, 3), mask (B, T, 2), wavelength_m, radii (19,), rcs_exponent=1.0,
-                    extent=0.0)
+    bone_scatterers(joints (B, T, 2, 21, 3), mask (B, T, 2), wavelength_m, radii (19,), rcs_exponent=1.0)
         -> Scatterers: one point per bone at its midpoint, cylinder RCS with the bone's own length
-        (rcs_exponent: the aspect exponent of handradar.sim.rcs.cylinder_rcs_m2); extent > 0: the
-        bone's reflection spread along it (below)
+        (rcs_exponent: the aspect exponent of handradar.sim.rcs.cylinder_rcs_m2)
     radar_amplitude(rcs_m2, r_tx_m, r_rx_m, wavelength_m, tx_power_w, gain_tx_dbi, gain_rx_dbi) -> A
     Scatterers.cat(other) -> Scatterers (points appended)
 """
@@ -93,27 +82,15 @@ def bone_rcs_m2(midpoint: torch.Tensor, axis: torch.Tensor, length: torch.Tensor
     return cylinder_rcs_m2(cos_angle(midpoint, axis), radii, length, wavelength_m, exponent)
 
 
-N_ALONG = 3  # points per bone with an extent: the fewest that keep the midpoint and stay symmetric
-
-
 def bone_scatterers(joints: torch.Tensor, mask: torch.Tensor, wavelength_m: float,
-                    radii: torch.Tensor, rcs_exponent: float = 1.0, extent: float = 0.0) -> Scatterers:
-    """Scattering centres of the bones, slots hand * 19 + bone; untracked: gain 0. ``extent`` 0: one
-    per bone at its midpoint; > 0: three along it (module doc)."""
-    if not 0.0 <= extent <= 1.0:
-        raise ValueError(f"bone extent must be in [0, 1] (a fraction of the bone's length), found {extent}")
+                    radii: torch.Tensor, rcs_exponent: float = 1.0) -> Scatterers:
+    """One scattering centre per bone (bone midpoint), slots hand * 19 + bone; untracked: gain 0."""
     b, t = joints.shape[:2]
     mid, axis, length = bone_geometry(joints)  # (B, T, 2, 19, ...)
     rcs = bone_rcs_m2(mid, axis, length, radii.to(joints.dtype), wavelength_m, rcs_exponent).reshape(b, t, N_SLOTS)
     gain = mask.to(joints.dtype)[..., None].expand(b, t, 2, N_BONES).reshape(b, t, N_SLOTS)
     pos = mid.reshape(b, t, N_SLOTS, 3)
-    owner = torch.arange(N_SLOTS, device=joints.device)
-    if extent == 0.0:
-        return Scatterers(pos, pos, rcs, gain, owner)
-    step = (extent / N_ALONG) * axis.reshape(b, t, N_SLOTS, 3)  # axis: parent -> child, full length
-    pos = torch.cat([pos, pos - step, pos + step], 2)
-    return Scatterers(pos, pos, (rcs / N_ALONG**2).repeat(1, 1, N_ALONG), gain.repeat(1, 1, N_ALONG),
-                      owner.repeat(N_ALONG))
+    return Scatterers(pos, pos, rcs, gain, torch.arange(N_SLOTS, device=joints.device))
 
 
 def radar_amplitude(rcs_m2: torch.Tensor, r_tx_m: torch.Tensor, r_rx_m: torch.Tensor, wavelength_m: float,

@@ -6,14 +6,13 @@ Pipeline of one batch (every step torch, differentiable end to end):
       -> skeleton-stage effects (tracking_jitter, sync_offset)
       -> untracked steps of a partly tracked hand hold its last tracked pose (hold_untracked)
       -> standard-hand retargeting (handradar.hand.retarget; HandModelConfig.retarget)
-      -> one scattering centre per bone at its midpoint (or three along it: bone_extent), cylinder RCS (sim.scatterers)
+      -> one scattering centre per bone at its midpoint, cylinder RCS (sim.scatterers)
       -> scatterer-stage effects (palm, forearm, occlusion, multipath, antenna_pattern)
       -> per-slot range profiles at the true chirp times (sim.profiles)      (B, 39, F, L, Ch, bins)
       -> weighted sum with RadarWeightNet weights (or 1)                      (B, F, L, Ch, bins)
       -> signal-stage effects (noise)
       -> handradar.radar.chain.spectrogram_from_profiles: the chain of the measured data (B, 64, 32),
-         with the slots' cross terms kept in the share ``coherence`` and the power spread in Doppler
-         (doppler_spread) before dB
+         with the slots' cross terms kept in the share ``coherence``
 
 The window starts at a frame boundary, so its chirp times are ``radar.chirp_times_s(frames)``
 with frames = chain.frames_per_window(radar); the skeleton times default to
@@ -26,14 +25,8 @@ Public API:
 
     Simulator(radar, chain, *, hand=HandModelConfig(), effects=(), effect_params=None,
               skeleton_rate_hz=100.0, tx_power_w=0.0158, gain_tx_dbi=10.5, gain_rx_dbi=10.5,
-              rcs_exponent=1.0, bone_extent=0.0, doppler_spread=0.0, metacarpal_gain=1.0, coherence=1.0,
-              compile_combine=False)
+              rcs_exponent=1.0, metacarpal_gain=1.0, coherence=1.0, compile_combine=False)
       rcs_exponent: aspect exponent of every cylinder's RCS (handradar.sim.rcs; 1 = the paper's)
-      bone_extent: fraction of each bone's length its reflection is spread over (handradar.sim.scatterers;
-            0 = the paper's single centre at the midpoint)
-      doppler_spread: std, in Doppler rows, of a Gaussian the power is spread by along Doppler before dB
-            (spread_doppler; 0 = none): a generic broadening of every line (micro-motion, extended
-            scatterers) that the diagnosis's step 0 can fit
       metacarpal_gain: amplitude factor of the four finger metacarpals' reflection points (1 = the
             paper's cylinders; 0 = none, as if the palm's flesh buried them): a generic knob of
             step 0, since wrist-to-knuckle cylinders are the hand model's crudest part
@@ -110,31 +103,14 @@ def hold_untracked(positions: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     return torch.where(mask[..., None, None], positions, held)
 
 
-def spread_doppler(power: torch.Tensor, sigma_rows: float) -> torch.Tensor:
-    """Power (..., doppler, columns) spread along Doppler by a Gaussian of std ``sigma_rows`` rows,
-    circularly (the DFT's Doppler axis wraps) and normalised (the total power per column is kept);
-    ``sigma_rows`` = 0 returns the input. What a velocity spread of std sigma_rows x the Doppler
-    resolution does to a power spectrum (each line becomes that Gaussian)."""
-    if sigma_rows <= 0.0:
-        return power
-    n = power.shape[-2]
-    d = torch.arange(n, dtype=torch.float64, device=power.device)
-    d = torch.minimum(d, n - d)  # circular distance from row 0
-    kernel = torch.exp(-0.5 * (d / sigma_rows) ** 2)
-    kernel = (kernel / kernel.sum()).to(power.dtype)
-    # circular convolution along Doppler as a product of DFTs (real power in, real power out)
-    out = torch.fft.irfft(torch.fft.rfft(power, dim=-2) * torch.fft.rfft(kernel, dim=0)[:, None], n=n, dim=-2)
-    return out.clamp_min(0.0)
-
-
 class Simulator(nn.Module):
     """Cylinder-mesh hand reflection model of Tang et al. plus optional effects (module doc)."""
 
     def __init__(self, radar: RadarConfig, chain: ChainConfig, *, hand: HandModelConfig | None = None,
                  effects: list | tuple = (), effect_params: dict | None = None, skeleton_rate_hz: float = 100.0,
                  tx_power_w: float = 0.0158, gain_tx_dbi: float = 10.5, gain_rx_dbi: float = 10.5,
-                 rcs_exponent: float = 1.0, bone_extent: float = 0.0, doppler_spread: float = 0.0,
-                 metacarpal_gain: float = 1.0, coherence: float = 1.0, compile_combine: bool = False) -> None:
+                 rcs_exponent: float = 1.0, metacarpal_gain: float = 1.0, coherence: float = 1.0,
+                 compile_combine: bool = False) -> None:
         super().__init__()
         self.radar, self.chain = radar, chain
         self.hand = hand if isinstance(hand, HandModelConfig) else HandModelConfig(**dict(hand or {}))
@@ -144,12 +120,6 @@ class Simulator(nn.Module):
         self.rcs_exponent = float(rcs_exponent)
         if not 0.0 <= self.rcs_exponent <= 1.0:
             raise ValueError(f"rcs_exponent must be in [0, 1] (1: the paper's cylinder RCS), found {rcs_exponent}")
-        self.bone_extent = float(bone_extent)
-        if not 0.0 <= self.bone_extent <= 1.0:
-            raise ValueError(f"bone_extent must be in [0, 1] (0: the paper's one centre per bone), found {bone_extent}")
-        self.doppler_spread = float(doppler_spread)
-        if not 0.0 <= self.doppler_spread <= chain.stft_len:
-            raise ValueError(f"doppler_spread must be in [0, {chain.stft_len}] Doppler rows (0: none), found {doppler_spread}")
         self.metacarpal_gain = float(metacarpal_gain)
         if not 0.0 <= self.metacarpal_gain <= 1.0:
             raise ValueError(f"metacarpal_gain must be in [0, 1] (1: the paper's cylinders), found {metacarpal_gain}")
@@ -168,8 +138,6 @@ class Simulator(nn.Module):
         """Everything that determines this simulator's output, for cache keys (handradar.provenance.config_hash)."""
         return {"radar": self.radar, "chain": self.chain, "hand": self.hand.key(), "skeleton_rate_hz": self.skeleton_rate_hz,
                 "amplitude": (self.tx_power_w, self.gain_tx_dbi, self.gain_rx_dbi), "rcs_exponent": self.rcs_exponent,
-                **({"bone_extent": self.bone_extent} if self.bone_extent else {}),
-                **({"doppler_spread": self.doppler_spread} if self.doppler_spread else {}),
                 **({"metacarpal_gain": self.metacarpal_gain} if self.metacarpal_gain != 1.0 else {}),
                 **({"coherence": self.coherence} if self.coherence != 1.0 else {}),
                 "effects": [(e.name, e.values(), e.settings()) for e in self.effects]}
@@ -220,8 +188,7 @@ class Simulator(nn.Module):
 
     def scatterers(self, ctx: SimContext) -> Scatterers:
         """The reflection points of a context: the bones', then the scatterer-stage effects."""
-        scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii, self.rcs_exponent,
-                               self.bone_extent)
+        scat = bone_scatterers(ctx.joints, ctx.mask, self.radar.wavelength_m, self.radii, self.rcs_exponent)
         if self.metacarpal_gain != 1.0:
             scat = scat.slots_scaled(METACARPAL_SLOTS, self.metacarpal_gain)
         for e in self._stage("scatterers"):
@@ -332,7 +299,7 @@ class Simulator(nn.Module):
         for e in stage:
             if e not in drawn:  # after the drawn ones (noise, order 80, is the last signal effect)
                 power = power + e.expected_power(s, self.radar, self.chain, scale)
-        return power_to_unit(spread_doppler(power, self.doppler_spread), self.chain)
+        return power_to_unit(power, self.chain)
 
     def render(self, slot_profiles: torch.Tensor, weights: torch.Tensor | None = None, *,
                times: torch.Tensor | None = None, active: torch.Tensor | None = None,
