@@ -1,6 +1,7 @@
 """Judge step 0's opt-in generic settings on a benchmark world's effect-free rows.
 
     python -m experiments.generic_settings [OVERRIDE ...]     e.g. world=scatterers benchmark.size=240
+    python -m experiments.generic_settings --summary          every kept record in one table
 
 Composes diagnose.py's ``+experiment=gap_benchmark`` preset with the overrides and builds (or reuses
 from the cache) the world's effect-free case. For each setting of SETTINGS, step 0 alone (no
@@ -36,6 +37,7 @@ from handradar.provenance import REPO_ROOT, code_version, machine
 SETTINGS: dict[str, list[float]] = {"metacarpal_gains": [1.0, 0.75, 0.5, 0.25, 0.0],
                                     "coherences": [1.0, 0.5, 0.0]}
 PRESET = ["+experiment=gap_benchmark"]
+RESULTS = REPO_ROOT / "results" / "gap_benchmark" / "generic_settings"
 
 
 def step0(data, sim: dict, diagnose: dict, cache_dir: Path) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -71,14 +73,19 @@ def judge(overrides: list[str]) -> dict:
     return out
 
 
+def _setting(name: str) -> str:
+    """The simulator setting of a diagnose list (``coherences`` -> ``coherence``), removed ones included."""
+    from handradar.gap.report import GENERIC_SETTINGS
+
+    return GENERIC_SETTINGS[name][0] if name in GENERIC_SETTINGS else name.removesuffix("s")
+
+
 def picks(calibration: dict, setting: str) -> str:
     """What step 0 picked for ``setting`` in each fold (the folds' list), e.g. '0.5, 0'."""
     return ", ".join(f"{f[setting]:g}" for f in calibration.get("folds") or [calibration] if setting in f)
 
 
 def markdown(result: dict) -> str:
-    from handradar.gap.report import GENERIC_SETTINGS
-
     lines = [f"Effect-free case, {result['rows']} recordings, step 0 cross-fitted; exponents alone: "
              f"SSIM {result['exponents_only']['ssim']:.4f}.", "",
              "| setting | values | out-of-fold SSIM | gap closed [95 % CI] | picked per fold | helps |",
@@ -86,18 +93,38 @@ def markdown(result: dict) -> str:
     for name, r in result["settings"].items():
         lo, hi = r["ci95"]
         lines.append(f"| `diagnose.{name}` | {r['values']} | {r['ssim']:.4f} | {r['gap_closed']:+.4f} "
-                     f"[{lo:+.4f}, {hi:+.4f}] | {picks(r['calibration'], GENERIC_SETTINGS[name][0])} | "
+                     f"[{lo:+.4f}, {hi:+.4f}] | {picks(r['calibration'], _setting(name))} | "
                      f"{'yes' if r['helps'] else 'no'} |")
     return "\n".join(lines) + "\n"
 
 
+def summary_markdown(folder: Path) -> str:
+    """Every record of ``folder`` in one table: per world and size, the gap each setting closes out of fold."""
+    records = {p.stem: json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))}
+    names = list(dict.fromkeys(n for r in records.values() for n in r["settings"]))
+    lines = ["| world, recordings | exponents alone: SSIM | " + " | ".join(f"`{n}`" for n in names) + " |",
+             "|---|---|" + "---|" * len(names)]
+    for label, r in records.items():
+        cells = []
+        for n in names:
+            c = r["settings"].get(n)
+            cells.append("–" if c is None else f"{c['gap_closed']:+.3f} [{c['ci95'][0]:+.3f}, {c['ci95'][1]:+.3f}]"
+                         + (" **helps**" if c["helps"] else ""))
+        world, size = label.rsplit("_", 1)
+        lines.append(f"| {world}, {size} | {r['exponents_only']['ssim']:.4f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str]) -> Path:
+    if argv == ["--summary"]:
+        print(summary_markdown(RESULTS), end="")
+        return RESULTS
     result = judge(argv)
     overrides = dict(a.split("=", 1) for a in argv if "=" in a)
     label = f"{overrides.get('world', 'default')}_{overrides.get('benchmark.size', '240')}"
     result.update(command="python -m experiments.generic_settings " + " ".join(argv), commit=code_version(),
                   machine=machine())
-    path = REPO_ROOT / "results" / "gap_benchmark" / "generic_settings" / f"{label}.json"
+    path = RESULTS / f"{label}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, json.dumps(result, indent=1) + "\n")
     print(markdown(result), end="")
@@ -108,4 +135,4 @@ def main(argv: list[str]) -> Path:
 if __name__ == "__main__":
     from handradar.runs.cli import run_cli
 
-    run_cli(lambda: main(sys.argv[1:]), usage="python -m experiments.generic_settings [OVERRIDE ...]")
+    run_cli(lambda: main(sys.argv[1:]), usage="python -m experiments.generic_settings [OVERRIDE ...] | --summary")
