@@ -100,7 +100,11 @@ def markdown(result: dict) -> str:
 
 def summary_markdown(folder: Path) -> str:
     """Every record of ``folder`` in one table: per world and size, the gap each setting closes out of fold."""
-    records = {p.stem: json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))}
+    def order(p: Path) -> tuple:  # the tuning world first, then by name, the larger size first
+        world, size = p.stem.rsplit("_", 1)
+        return world != "default", world, -int(size)
+
+    records = {p.stem: json.loads(p.read_text()) for p in sorted(folder.glob("*.json"), key=order)}
     names = list(dict.fromkeys(n for r in records.values() for n in r["settings"]))
     lines = ["| world, recordings | exponents alone: SSIM | " + " | ".join(f"`{n}`" for n in names) + " |",
              "|---|---|" + "---|" * len(names)]
