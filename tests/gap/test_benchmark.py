@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import h5py
 import numpy as np
@@ -347,5 +348,13 @@ def test_several_effects_withheld_at_once_are_one_case_judged_by_what_is_kept():
            {"case": "nothing", "truth": "none", "cause": "none", "true_gap_closed": None, "after_gap_closed": 0.0}]
     s = score(res)
     assert s["effects_total"] == 0 and s["controls_total"] == 1  # the several-effect case is scored apart
+    # its MLflow metric names are valid ones (letters, digits, _-. :/), where the case's own name is not
+    from handradar.gap.benchmark import case_metrics
+
+    report = {"baseline": {"ssim": 0.9, "mse": 0.01}, "after": {"ssim": 0.92, "gap_closed": 0.2},
+              "candidates": [{"effect": "forearm", "gap_closed": 0.1, "ci95": [0.05, 0.15]}]}
+    names = list(case_metrics(case.name, report))
+    assert "bench/tracking_jitter-forearm-multipath/after_gap_closed" in names
+    assert all(re.fullmatch(r"[A-Za-z0-9_\-. :/]+", n) for n in names)
     assert s["several"] == [{"case": case.name, "after_effects": ["forearm"], "kept_precision": 1.0,
                              "kept_recall": pytest.approx(1 / 3), "after_gap_closed": 0.2, "reference_gap_closed": 0.3}]

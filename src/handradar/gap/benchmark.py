@@ -371,6 +371,13 @@ def _case_result(case: Case, report: dict, seconds: float, n_rows: int) -> dict:
                             if k not in ("effects", "effect_grids")}}
 
 
+def case_metrics(case_name: str, report: dict) -> dict[str, float]:
+    """A case's headline numbers for MLflow, ``bench/<case>/<name>``; a several-effect case's "+" reads
+    "-" (MLflow names take letters, digits and ``_-. :/`` only; effect names have no "-")."""
+    key = case_name.replace("+", "-")
+    return {f"bench/{key}/{k.split('/', 1)[1]}": v for k, v in headline_metrics(report).items()}
+
+
 DEFAULT_COMMAND = "python diagnose.py +experiment=gap_benchmark"
 # overrides that only say where outputs go or how progress shows: left out of the command a results file names
 OUTPUT_KEYS = ("benchmark.state_dir", "benchmark.record_dir", "progress")
@@ -494,8 +501,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             atomic_write_text(done, json.dumps(res, indent=1) + "\n")
             results.append(res)
             log.info("case %s: truth %s, cause %s (%.0f s)", case.name, case.truth, res["cause"], res["seconds"])
-            tracker.log_metrics({f"bench/{case.name}/{k.split('/', 1)[1]}": v
-                                 for k, v in headline_metrics(diagnosis.report).items()})
+            tracker.log_metrics(case_metrics(case.name, diagnosis.report))
         scores = score(results)
         fig = confusion_figure(np.asarray(scores["matrix"]), [f"{r['case']} ({r['truth']})" for r in results],
                                scores["labels"], out / FIGURE,
