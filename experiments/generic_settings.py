@@ -10,7 +10,7 @@ exponent, and is compared with step 0 on the exponents alone on the same out-of-
 SSIM of each, and the share of the gap the setting closes with its paired-bootstrap 95 % CI.
 
 The rule, fixed before any run: a setting helps a world where that CI's lower bound is above 0.
-Writes results/gap_benchmark/generic_settings_<world>_<size>.json (with command, commit, machine)
+Writes results/gap_benchmark/generic_settings/<world>_<size>.json (with command, commit, machine)
 and prints a markdown table.
 """
 
@@ -33,7 +33,8 @@ from handradar.gap.job import fit_simulator
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import REPO_ROOT, code_version, machine
 
-# each opt-in setting with the values its documentation suggests (conf/diagnose.yaml)
+# each opt-in setting with the values its documentation suggests (conf/diagnose.yaml); the records also hold
+# the two judged with them and removed, bone_extents [0, 0.5, 1] and doppler_spreads [0, 0.5, 1, 2]
 SETTINGS: dict[str, list[float]] = {"metacarpal_gains": [1.0, 0.75, 0.5, 0.25, 0.0],
                                     "coherences": [1.0, 0.5, 0.0]}
 PRESET = ["+experiment=gap_benchmark"]
