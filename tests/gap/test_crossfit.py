@@ -160,9 +160,10 @@ def test_cross_fitted_recordings_needed_are_evaluation_rows():
     ssim = before + 0.03 * (1.0 - before) + rng.normal(0.0, 0.01, before.shape)
     lead = Candidate("palm", {}, GridFit("palm", [], []), ssim, np.zeros_like(ssim), 0.03, (-0.02, 0.08))
     _, ev = _evidence(before, [lead], DiagnosisConfig(folds=3))
-    assert ev["evaluation_rows_needed"] == ev["recordings_needed"] == 167  # 60 * (5/3)^2 = 166.7
+    # 60 * (5/3)^2 * 2.0431 (80 % power) = 340.5
+    assert ev["evaluation_rows_needed"] == ev["recordings_needed"] == 341
     _, single = _evidence(before, [lead], DiagnosisConfig())
-    assert single["recordings_needed"] == 334  # / (1 - calibration_fraction 0.5)
+    assert single["recordings_needed"] == 682  # / (1 - calibration_fraction 0.5)
 
 
 if __name__ == "__main__":

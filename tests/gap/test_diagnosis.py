@@ -273,15 +273,23 @@ def test_a_significant_but_small_gain_names_no_cause():
     wide = cand("noise", 0.03, (-0.02, 0.08))  # clearly ahead of palm, but its own CI contains 0
     cause, ev = _evidence(before, [wide, other], cfg)
     assert ev["clearly_ahead"] and cause == "inconclusive"
-    # the CI's half-width 0.05 must shrink to 0.03 from 200 evaluation rows: 200 * (5/3)^2 = 555.6 -> 556
-    # rows; over calibration + evaluation at fraction 0.5: 1111.1 -> 1112 recordings
-    assert (ev["evaluation_rows_needed"], ev["recordings_needed"]) == (556, 1112)
+    # the CI's half-width 0.05 (se 0.05 / 1.96) against the margin 0.03, from 200 evaluation rows, at 80 %
+    # power: 200 * ((1.96 + 0.8416) / 1.96 * 5/3)^2 = 1135.1 -> 1136 rows; over calibration + evaluation
+    # at fraction 0.5: 2270.2 -> 2271 recordings
+    assert (ev["evaluation_rows_needed"], ev["recordings_needed"]) == (1136, 2271)
     assert "CI of gap_closed above 0" in ev["decides"]
 
 
+# the sample size for a two-sided 95 % test at 80 % power, against the rows where the half-width just
+# reaches the margin: ((z_0.975 + z_0.8) / z_0.975)^2 (scipy.stats.norm.ppf(0.8) = 0.8416)
+POWER = ((1.96 + 0.8416) / 1.96) ** 2
+
+
 def test_rows_to_decide_scales_the_half_width_with_one_over_sqrt_rows():
-    # [0.01, 0.05] from 50 rows: half-width 0.02; to shrink it to a margin of 0.01 takes 4x the rows
-    assert rows_to_decide(50, (0.01, 0.05), 0.01) == pytest.approx(200.0)
+    # [0.01, 0.05] from 50 rows: half-width 0.02; shrinking it to a margin of 0.01 takes 4x the rows, and
+    # clearing the bound with 80 % probability POWER (2.04) times that
+    assert rows_to_decide(50, (0.01, 0.05), 0.01) == pytest.approx(200.0 * POWER)
+    assert POWER == pytest.approx(2.0431, abs=1e-4)
     assert rows_to_decide(50, (-0.01, 0.05), 0.06) == 51.0  # a skewed CI: never fewer rows than failed
     assert rows_to_decide(50, (0.01, 0.05), 0.0) is None
     assert rows_to_decide(50, (0.01, 0.05), -0.01) is None
@@ -305,20 +313,22 @@ def test_decide_says_none_when_the_leader_is_bounded_below_the_threshold():
 
 
 @pytest.mark.parametrize("args, kw, rows, recordings, shows", [
-    # straddles the threshold, estimate below it: prove the upper bound below 0.02. Half-width 0.01 must
-    # shrink to 0.02 - 0.015 = 0.005: 60 * (0.01 / 0.005)^2 = 240 rows (the lead's CI, containing 0, does
-    # not count: a "none" needs no separation from the runner-up)
-    (("noise", 0.015, (0.005, 0.025), 0.002, (-0.01, 0.014)), {}, 240, 480, "upper 95 % bound"),
-    # relevant and significant, lead CI contains 0: half-width 0.015 to the lead 0.01: 60 * 1.5^2 = 135 rows
-    (("palm", 0.05, (0.03, 0.07), 0.01, (-0.005, 0.025)), {}, 135, 270, "lead over the runner-up"),
-    # ... at a calibration fraction of 0.6: 135 / 0.4 = 337.5 -> 338 recordings
-    (("palm", 0.05, (0.03, 0.07), 0.01, (-0.005, 0.025)), {"calibration_fraction": 0.6}, 135, 338, "lead"),
-    # both fail; the leader's own CI needs more: half-width 0.05 to 0.03: 60 * (5/3)^2 = 166.7 -> 167 rows,
-    # the lead's 0.03 to 0.02: 60 * 1.5^2 = 135; at calibration fraction 0.25: 166.7 / 0.75 = 222.2 -> 223
-    (("palm", 0.03, (-0.02, 0.08), 0.02, (-0.01, 0.05)), {"calibration_fraction": 0.25}, 167, 223,
+    # (each: 60 rows x (half-width / margin)^2 x POWER 2.0431, the 80 % power factor)
+    # straddles the threshold, estimate below it: prove the upper bound below 0.02. Half-width 0.01 against
+    # 0.02 - 0.015 = 0.005: 60 * 2^2 * 2.0431 = 490.4 -> 491 rows (the lead's CI, containing 0, does not
+    # count: a "none" needs no separation from the runner-up)
+    (("noise", 0.015, (0.005, 0.025), 0.002, (-0.01, 0.014)), {}, 491, 981, "upper 95 % bound"),
+    # relevant and significant, lead CI contains 0: half-width 0.015 against the lead 0.01:
+    # 60 * 1.5^2 * 2.0431 = 275.8 -> 276 rows
+    (("palm", 0.05, (0.03, 0.07), 0.01, (-0.005, 0.025)), {}, 276, 552, "lead over the runner-up"),
+    # ... at a calibration fraction of 0.6: 275.8 / 0.4 = 689.6 -> 690 recordings
+    (("palm", 0.05, (0.03, 0.07), 0.01, (-0.005, 0.025)), {"calibration_fraction": 0.6}, 276, 690, "lead"),
+    # both fail; the leader's own CI needs more: half-width 0.05 against 0.03: 60 * (5/3)^2 * 2.0431 = 340.5
+    # -> 341 rows, the lead's 0.03 against 0.02: 275.8; at calibration fraction 0.25: 340.5 / 0.75 = 454.0 -> 455
+    (("palm", 0.03, (-0.02, 0.08), 0.02, (-0.01, 0.05)), {"calibration_fraction": 0.25}, 341, 455,
      "CI of gap_closed above 0 and"),
-    # no runner-up, own CI contains 0: half-width 0.04 to 0.03: 60 * (4/3)^2 = 106.7 -> 107 rows
-    (("palm", 0.03, (-0.01, 0.07), None, None), {}, 107, 214, "CI of gap_closed above 0"),
+    # no runner-up, own CI contains 0: half-width 0.04 against 0.03: 60 * (4/3)^2 * 2.0431 = 217.9 -> 218 rows
+    (("palm", 0.03, (-0.01, 0.07), None, None), {}, 218, 436, "CI of gap_closed above 0"),
 ])
 def test_decide_is_inconclusive_with_the_recordings_that_would_decide(args, kw, rows, recordings, shows):
     v = decide(*args, **{**DECIDE, **kw})
@@ -335,10 +345,11 @@ def test_decide_gives_no_estimate_when_a_margin_is_not_positive():
 
 
 @pytest.mark.parametrize("lead, rows", [
-    # lead CI half-width 0.015: a lead of 0.0015 needs 60 * 10^2 = 6000 rows, exactly 100x: still estimated
-    (0.0015, 6000),
-    # a lead of 0.0014 needs 60 * (0.015 / 0.0014)^2 = 6888 rows > 100x the 60 at hand: no estimate
-    (0.0014, None),
+    # lead CI half-width 0.015: a lead of 0.0022 needs 60 * (0.015 / 0.0022)^2 * 2.0431 = 5698.6 -> 5699 rows,
+    # under 100x the 60 at hand: still estimated
+    (0.0022, 5699),
+    # a lead of 0.0021 needs 60 * (0.015 / 0.0021)^2 * 2.0431 = 6254.5 rows > 100x: no estimate
+    (0.0021, None),
 ])
 def test_decide_gives_no_estimate_beyond_a_hundred_times_the_rows(lead, rows):
     # the held-out benchmark's multipath leader, 0.0004 under the threshold, was given 355915 recordings

@@ -92,6 +92,6 @@ def test_gap_report_writes_the_table_and_the_published_one_is_current(tmp_path: 
     # is generated from them (make gap-report) and must not drift from them
     published = load_records(REPO / "results" / "gap_benchmark")
     assert {(r["world"], r["size"]) for r in published} == {(w, n) for w in ("default", "heldout", "heldout2", "heldout3")
-                                                            for n in (240, 36)} | {("scatterers", 36)}
+                                                            for n in (240, 36)} | {("scatterers", 240), ("scatterers", 36)}
     assert all(r["command"].startswith("python diagnose.py +experiment=gap_benchmark ") for r in published)
     assert (REPO / "docs" / "gap_report.md").read_text() == summary_markdown(published)

@@ -66,7 +66,8 @@ def _cause(cause: str, ev: dict) -> str:
     if ev.get("recordings_needed") is None:
         return line + f". No number of recordings is estimated to decide it: {ev.get('decides') or '-'}."
     return (line + f". About {ev['recordings_needed']} recordings ({ev['evaluation_rows_needed']} evaluation rows; "
-            f"CI half-widths scaled by 1/sqrt(rows), if the estimates held) would show {ev['decides']}.")
+            f"standard errors scaled by 1/sqrt(rows); 80 % likely if the estimates are the truth) would show "
+            f"{ev['decides']}.")
 
 
 def _ci(ci: list[float]) -> str:
