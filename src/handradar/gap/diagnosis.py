@@ -215,8 +215,9 @@ def decide(effect: str, gap_closed: float, ci95: Sequence[float], lead: float | 
     """The verdict on the leading candidate ``effect`` (gap_closed [ci95]; ``lead`` [lead_ci95]: its
     paired lead over the runner-up, None without one): ``cause`` = the effect, "none" or
     "inconclusive", and for "inconclusive" what must be shown (``decides``) and the rows that would
-    show it with 80 % probability if the point estimates are the truth (``evaluation_rows_needed``; ``recordings_needed`` =
-    calibration + evaluation at ``calibration_fraction``; None when no number of rows would)."""
+    show it with 80 % probability if the point estimates are the truth (``evaluation_rows_needed``;
+    ``recordings_needed`` = calibration + evaluation at ``calibration_fraction``; None when no number
+    of rows would)."""
     out: dict = {"cause": effect, "decides": None, "evaluation_rows_needed": None, "recordings_needed": None}
     ahead = lead_ci95 is None or lead_ci95[0] > 0
     relevant = gap_closed >= min_gap_closed

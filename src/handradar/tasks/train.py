@@ -21,9 +21,9 @@ handradar.gap.job.fit_simulator), optionally drawn ``synth.samples_per_row`` tim
 nuisance parameters (``synth.randomize``, :func:`nuisance_draw`). ``external_pretrain`` pre-trains on
 ``synth.external_provider`` data, simulated with the simulator fitted on the smallest fraction's rows,
 and fine-tunes on few-shot fractions of class subsets, against the same training from scratch; one
-split per fraction, restricted to each subset's classes, so the fit's rows train every fine-tune. Any other job kind is
-a dotted function name ``fn(job: Job) -> {metric name: number}`` (e.g. a synthesis-fit job): it gets
-the loaded real data (``job.real``), the state folder (``job.state``, for resumable work), the
+split per fraction, restricted to each subset's classes, so the fit's rows train every fine-tune.
+Any other job kind is a dotted function name ``fn(job: Job) -> {metric name: number}`` (e.g. a
+synthesis-fit job): it gets the loaded real data (``job.real``), the state folder (``job.state``, for resumable work), the
 tracker and ``job.cfg``, and its metrics go to metrics.json and MLflow like the built-in kinds.
 
 Progress: each stage (the data, what the variants add, each variant, the summary) is announced on
