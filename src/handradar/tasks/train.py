@@ -526,6 +526,7 @@ class Job:
     def run_external_pretrain(self) -> dict[str, dict]:
         real, results = self.real, {}
         backbone = None
+        splits = {float(f): self.finetune_split(f) for f in self.cfg.finetune.fractions}  # shared by the subsets
         for subset in self.cfg.finetune.class_subsets:
             names = list(real.classes) if subset is None else list(subset)
             unknown = sorted(set(names) - set(real.classes))
@@ -536,7 +537,7 @@ class Job:
             remap = np.full(len(real.classes), -1, dtype=np.int64)
             remap[ids] = np.arange(len(ids))
             for fraction in self.cfg.finetune.fractions:
-                split = self.finetune_split(fraction)
+                split = splits[float(fraction)]
                 train, test = np.intersect1d(split.train, rows), np.intersect1d(split.test, rows)
                 for init in ("scratch", "pretrained"):
                     name = f"{init}_{len(ids)}c_{float(fraction) * 100:g}pct"
