@@ -45,7 +45,8 @@ def test_build_tables_layout():
     assert "| 5 % | 0.450 ± 0.071 (n=2) | 0.650 ± 0.071 (n=2) | – | – |" in md
     assert "| 5 %* | – | – | – | 0.300 |" in md
     assert t3.sorted_rows() == ["10 classes, 5 % (external)", "5 classes, 10 % (external)"]
-    assert "| 10 classes, 5 % (external) | 0.300 | 0.500 |" in t3.markdown()
+    assert "| 10 classes, 5 % (external) | 0.300 | 0.500 | 0.200 |" in t3.markdown()
+    assert "| 5 classes, 10 % (external) | – | 0.900 | – |" in t3.markdown()  # no scratch arm: no difference
     assert t4.sorted_rows() == ["hands (single → double)"]
     rows = list(csv.reader(io.StringIO(t2.csv())))
     assert rows[0][:4] == ["row", "Radar only mean", "Radar only std", "Radar only n"]
@@ -65,6 +66,15 @@ def test_build_tables_layout():
                           {"params": {**_few(0.05, "fixed"), "seed": "1"}, "metrics": {"test/acc_radar_only": 0.9}},
                           {"params": {**_few(0.05, "fixed"), "seed": "2"}, "metrics": {"test/acc_radar_only": 0.5}}])[0]
     assert "| 5 %* | 0.400 ± 0.141 (n=2) |" in twice.markdown()
+    # Table III: a row per simulator; the difference is paired within each seed's job; the latest job of a seed counts
+    def pre(seed: str, fit: str, scratch: float, pretrained: float) -> dict:
+        return {"params": {"job": "external_pretrain", "pretrain.source": "sfinge3d", "seed": seed, "synth.fit_sim": fit},
+                "metrics": {"test/acc_scratch_10c_5pct": scratch, "test/acc_pretrained_10c_5pct": pretrained}}
+    (t3,) = build_tables([pre("1", "effects", 0.2, 0.5), pre("2", "effects", 0.4, 0.5), pre("1", "effects", 0.9, 0.9),
+                          pre("1", "none", 0.2, 0.1)])
+    assert t3.sorted_rows() == ["10 classes, 5 % (sfinge3d)", "10 classes, 5 % (sfinge3d) [fitted: effects]"]
+    assert "| 10 classes, 5 % (sfinge3d) [fitted: effects] | 0.300 ± 0.141 (n=2) | 0.500 ± 0.000 (n=2) | 0.200 ± 0.141 (n=2) |" in t3.markdown()
+    assert "| 10 classes, 5 % (sfinge3d) | 0.200 | 0.100 | -0.100 |" in t3.markdown()
     # one job's table (what train.py prints)
     assert job_table(_few(0.5), {"test/acc_radar_only": 0.9}).endswith("| 50 % | 0.900 | – | – | – | – | – | – |")
 

@@ -6,8 +6,8 @@
   of the complete dataset), one column per variant (radar only, + model-based synthetic,
   + RadarWeightNet-enhanced synthetic, + CGAN; synthetic only, enhanced and model-based: train on
   synthetic, test on real; the pool's real rows, their upper reference).
-- Table III (pre-training): one row per (classes, fraction), columns trained from scratch and
-  pre-trained on synthetic spectrograms of an external skeleton dataset.
+- Table III (pre-training): one row per (classes, fraction, simulator), columns trained from scratch,
+  pre-trained on synthetic spectrograms of an external skeleton dataset, and their difference per seed.
 - Table IV (out of distribution): one row per OOD split, the variant columns.
 
 Cells are ``mean ± std`` of the accuracy over the records of a row (seeds), with the count.
@@ -208,7 +208,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
     few = Table("table2_few_shot", "Table II: few-shot accuracy (* = fixed test split of the complete dataset)",
                 variant_cols)
     pre = Table("table3_pretrain", "Table III: accuracy with and without pre-training on external synthetic data",
-                ["from scratch", "pre-trained"])
+                ["from scratch", "pre-trained", "pre-trained minus scratch"])
     ood = Table("table4_ood", "Table IV: out-of-distribution accuracy", variant_cols)
     seen: set[tuple] = set()  # (table, row, column, seed): records come latest first, the latest run counts
     for rec in records:
@@ -224,13 +224,24 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
         if p.get("job") not in ("variants", "external_pretrain"):
             continue  # not a train.py job
         if p.get("job") == "external_pretrain":
-            source = p.get("pretrain.source", "external")
+            source, setting = p.get("pretrain.source", "external"), synthesis_setting(p)
+            found: dict[tuple[str, str], dict[str, float]] = {}  # (classes, pct) -> init -> accuracy
             for name, value in metrics.items():
                 m = PRETRAIN_METRIC.match(name)
                 if m:
-                    init, classes, pct = m.groups()
-                    pre.add(f"{classes} classes, {pct} % ({source})", "pre-trained" if init == "pretrained" else "from scratch",
-                            value, (-int(classes), int(pct)), rec.get("provenance"))
+                    found.setdefault(m.group(2, 3), {})[m.group(1)] = value
+            for (classes, pct), acc in found.items():
+                row = f"{classes} classes, {pct} % ({source}){setting}"
+                cell = (pre.name, row, p.get("seed"))
+                if p.get("seed") is not None and cell in seen:
+                    continue
+                seen.add(cell)
+                # the paired difference: both arms of one job share its fine-tune split
+                values = {"from scratch": acc.get("scratch"), "pre-trained": acc.get("pretrained"),
+                          "pre-trained minus scratch": (acc["pretrained"] - acc["scratch"]) if len(acc) == 2 else None}
+                for column, value in values.items():
+                    if value is not None:
+                        pre.add(row, column, value, (-int(classes), int(pct), setting), rec.get("provenance"))
             continue
         if kind == "ood":
             ood_kind = p.get("split.ood", "?")
