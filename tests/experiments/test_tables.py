@@ -66,6 +66,15 @@ def test_build_tables_layout():
                           {"params": {**_few(0.05, "fixed"), "seed": "1"}, "metrics": {"test/acc_radar_only": 0.9}},
                           {"params": {**_few(0.05, "fixed"), "seed": "2"}, "metrics": {"test/acc_radar_only": 0.5}}])[0]
     assert "| 5 %* | 0.400 ± 0.141 (n=2) |" in twice.markdown()
+    # other data than the default world: rows of their own, never averaged with (or replacing) the world's
+    rec = "handradar.data.datasets.RecordingsFolder"
+    (other,) = build_tables([{"params": {**_few(0.05, "fixed"), "seed": "1"}, "metrics": {"test/acc_radar_only": 0.3}},
+                             {"params": {**_few(0.05, "fixed"), "seed": "1", "data.dataset._target_": rec,
+                                         "data.dataset.root": "/data/mine"}, "metrics": {"test/acc_radar_only": 0.9}},
+                             {"params": {**_few(0.05, "fixed"), "seed": "1", "data.dataset.world.seed": "101"},
+                              "metrics": {"test/acc_radar_only": 0.7}}])
+    assert sorted(other.sorted_rows()) == ["5 %*", "5 %* {recordings: mine}", "5 %* {world seed 101}"]
+    assert "| 5 %* | 0.300 |" in other.markdown()
     # Table III: a row per simulator; the difference is paired within each seed's job; the latest job of a seed counts
     def pre(seed: str, fit: str, scratch: float, pretrained: float) -> dict:
         return {"params": {"job": "external_pretrain", "pretrain.source": "sfinge3d", "seed": seed, "synth.fit_sim": fit},
