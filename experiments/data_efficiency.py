@@ -24,7 +24,7 @@ from omegaconf import OmegaConf
 
 from handradar.provenance import REPO_ROOT
 from handradar.vocab import GESTURES
-from handradar.runs.tables import mean_std, stats
+from handradar.runs.tables import data_setting, mean_std, stats
 from handradar.viz.common import pyplot, save_figure
 
 TASK = "data_efficiency"
@@ -39,15 +39,20 @@ CURVES = {
 CEILING = "real pool (ceiling)"  # the pool's real rows do not depend on k: one value per seed, kept at 0
 
 
-def curves(records: Iterable[Mapping]) -> dict[str, dict[int, list[float]]]:
-    """{curve: {rows per gesture: [accuracy per seed]}} of the data-efficiency runs among ``records``
-    (``{"params": flat config, "metrics": {...}}``, latest first: one value per curve, point and seed,
-    the latest run's); the paper's simulator's points, and the ceiling's (one per seed), sit at 0."""
+def ours(p: Mapping, data: str) -> bool:
+    """A data-efficiency run on ``data`` (a :func:`data_setting` label; "" the default world)."""
+    return p.get("task_name") == TASK and p.get("split.per_class") not in (None, "None") and data_setting(p).strip() == data.strip()
+
+
+def curves(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, list[float]]]:
+    """{curve: {rows per gesture: [accuracy per seed]}} of the data-efficiency runs on ``data`` among
+    ``records`` (``{"params": flat config, "metrics": {...}}``, latest first: one value per curve, point and
+    seed, the latest run's); the paper's simulator's points, and the ceiling's (one per seed), sit at 0."""
     out: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     seen: set[tuple] = set()
     for rec in records:
         p, m = rec["params"], rec["metrics"]
-        if p.get("task_name") != TASK or p.get("split.per_class") in (None, "None"):
+        if not ours(p, data):
             continue
         k = int(float(p["split.per_class"]))
         fitted = p.get("synth.fit_sim", "none") not in ("none", "None")
@@ -83,13 +88,13 @@ def _described(p: Mapping, fitted: Mapping | None, report: Mapping | None = None
     return text
 
 
-def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None) -> dict[int, list[str]]:
+def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None, data: str = "") -> dict[int, list[str]]:
     """{rows per gesture: the fitted simulator, one entry per seed: its RCS exponent and kept effects
     ("-": none), with their values where the job's fitted_sim.yaml is under ``log_dir``}."""
     out: dict[int, dict[str, str]] = defaultdict(dict)
     for rec in records:  # latest first: the latest run per size and seed
         p = rec["params"]
-        if p.get("task_name") == TASK and "synth.fitted.effects" in p and p.get("split.per_class") not in (None, "None"):
+        if ours(p, data) and "synth.fitted.effects" in p:
             described = _described(p, _state_file(rec, log_dir, "fitted_sim.yaml"),
                                    _state_file(rec, log_dir, "fit_report.json"))
             out[int(float(p["split.per_class"]))].setdefault(str(p.get("seed")), described)
@@ -149,12 +154,17 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--tracking-uri", default=DEFAULT_URI)
     ap.add_argument("--log-dir", type=Path, default=REPO_ROOT / "logs", help="where the jobs' state folders are")
     ap.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "figures" / "data_efficiency.png")
+    ap.add_argument("--data", default="", help="the runs' data, as make tables labels it (e.g. '{recordings: mine}'); "
+                                               "default: the default reference world")
     args = ap.parse_args(argv)
     records = load_records(args.tracking_uri)
-    data = curves(records)
+    data = curves(records, args.data)
     if not data:
-        raise SystemExit(f"no finished {TASK} runs in {args.tracking_uri}: run `make data-efficiency` first")
-    print(markdown(data, fitted_effects(records, args.log_dir)))
+        others = sorted({data_setting(r["params"]).strip() or "the default world" for r in records
+                         if r["params"].get("task_name") == TASK} - {args.data})
+        raise SystemExit(f"no finished {TASK} runs on {args.data or 'the default world'} in {args.tracking_uri}: "
+                         f"run `make data-efficiency` first" + (f"; runs on other data: {others}" if others else ""))
+    print(markdown(data, fitted_effects(records, args.log_dir, args.data)))
     out = plot(data, args.out, chance=1.0 / len(GESTURES))
     print(out)
     return out

@@ -41,6 +41,12 @@ def test_curves_group_by_rows_and_simulator():
     assert curves([*RECORDS, older])["radar only"] == {1: [0.2, 0.3], 4: [0.4]}
     assert fitted_effects([*RECORDS, older]) == fitted_effects(RECORDS)
     assert fitted_effects(RECORDS) == {1: ["seed 1: -", "seed 2: -"], 4: ["seed 1: sync_offset"]}
+    # runs on recordings make a curve of their own, and leave the default world's alone
+    mine = rec(1, 1, "effects", radar_only=0.1)
+    mine["params"].update({"data.dataset._target_": "handradar.data.datasets.RecordingsFolder", "data.dataset.root": "/d/mine"})
+    assert curves([mine, *RECORDS]) == curves(RECORDS)
+    assert curves([mine, *RECORDS], "{recordings: mine}") == {"radar only": {1: [0.1]}}
+    assert fitted_effects([mine, *RECORDS], data="{recordings: mine}") == {1: ["seed 1: -"]}
 
 
 def test_fitted_values_come_from_the_jobs_fitted_simulator(tmp_path: Path):
