@@ -26,6 +26,7 @@ from lightning.pytorch.utilities import rank_zero_only
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.runs.mlflow import Tracker
+from handradar.runs.progress import clock_text
 
 log = logging.getLogger(__name__)
 
@@ -74,11 +75,37 @@ class EpochStartCheckpoint(Callback):
             self._last = time.monotonic()
 
 
+class StepProgress(Callback):
+    """Log ``<name>: step k/N (elapsed m:ss, about m:ss left)`` at most every ``interval_s`` seconds: the
+    progress of a fit whose progress bar is off (sweeps whose logs go to files), which would otherwise be
+    silent for as long as it trains."""
+
+    def __init__(self, name: str, interval_s: float = 60.0, clock: Any = time.monotonic) -> None:
+        self.name, self.interval_s, self.clock = name, float(interval_s), clock
+
+    def on_train_start(self, trainer: pl.Trainer, pl_module: pl.LightningModule) -> None:
+        self._t0 = self._last = self.clock()
+        self._step0 = trainer.global_step  # a resumed fit: its rate counts only the steps taken now
+
+    def on_train_batch_end(self, trainer: pl.Trainer, pl_module: pl.LightningModule, outputs: Any, batch: Any,
+                           batch_idx: int) -> None:
+        now, step, total = self.clock(), trainer.global_step, trainer.max_steps
+        if now - self._last < self.interval_s or trainer.global_rank:
+            return
+        self._last = now
+        elapsed, done = now - self._t0, step - self._step0
+        left = f", about {clock_text(elapsed / done * (total - step))} left" if total > 0 and done > 0 else ""
+        log.info("%s: step %d%s (elapsed %s%s)", self.name, step, f"/{total}" if total > 0 else "", clock_text(elapsed), left)
+
+
 def make_trainer(trainer_cfg: DictConfig | Mapping, *, ckpt_dir: Path, seed: int, logger: Any = False,
                  callbacks: Sequence[Callback] = (), overrides: Mapping[str, Any] | None = None,
                  checkpoint_interval_s: float = 0.0) -> pl.Trainer:
-    """A Trainer from the ``trainer`` config plus resumable checkpointing into ``ckpt_dir``."""
+    """A Trainer from the ``trainer`` config plus resumable checkpointing into ``ckpt_dir``; without a
+    progress bar, the fit logs its steps (:class:`StepProgress`, named after ``ckpt_dir``'s parent)."""
     cfg = OmegaConf.merge(trainer_cfg, dict(overrides or {}))
+    if not cfg.get("enable_progress_bar", True):
+        callbacks = [*callbacks, StepProgress(Path(ckpt_dir).parent.name)]
     return instantiate(cfg, callbacks=[*callbacks, StepSeed(seed), EpochStartCheckpoint(ckpt_dir, checkpoint_interval_s)],
                        logger=logger,
                        default_root_dir=str(ckpt_dir), enable_checkpointing=False)
