@@ -50,6 +50,7 @@ sweep: $(STAMP) ## the paper's few-shot grid over seeds (Hydra multirun, joblib 
 data-efficiency: $(STAMP) ## the data-efficiency runs: 1-36 real rows per gesture x seeds 1-3, and the paper's simulator
 	$(PY) train.py -m hydra/launcher=joblib +experiment=data_efficiency seed=1,2,3 split.per_class=1,2,4,8,16,36 threads=1 $(ARGS)
 	$(PY) train.py -m hydra/launcher=joblib +experiment=data_efficiency 'variants=[radar_pool]' seed=1,2,3 threads=1 $(ARGS)
+	$(PY) train.py -m hydra/launcher=joblib +experiment=data_efficiency 'variants=[enhanced_synth]' seed=1,2,3 split.per_class=1,2,4,8,16,36 threads=1 $(ARGS)
 	$(PY) train.py -m hydra/launcher=joblib +experiment=data_efficiency synth.fit_sim=none 'variants=[model_synth_only]' seed=1,2,3 threads=1 $(ARGS)
 
 data-efficiency-figure: $(STAMP) ## the data-efficiency curve (docs/figures/data_efficiency.png) from the MLflow runs

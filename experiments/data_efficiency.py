@@ -3,7 +3,8 @@
     python -m experiments.data_efficiency [--tracking-uri URI] [--log-dir DIR] [--out FILE]
 
 Test accuracy against the real training rows per gesture (``split.per_class``), mean ± std over
-seeds: radar only; + synthetic data from the simulator fitted on those rows; synthetic only with
+seeds: radar only; + synthetic data from the simulator fitted on those rows, without and with
+RadarWeightNet (``'variants=[enhanced_synth]'``, its guard fitted on the same rows); synthetic only with
 that simulator; synthetic only with the paper's unfitted simulator (``synth.fit_sim=none``: no real
 row involved, drawn at 0); the pool's real spectrograms as the ceiling. Prints the curve as a
 markdown table, then the fitted simulator at each size per seed (its RCS exponent, the effects it kept
@@ -32,6 +33,7 @@ TASK = "data_efficiency"
 CURVES = {
     "radar only": ("test/acc_radar_only", None),
     "+ synthetic (fitted simulator)": ("test/acc_model_synth", True),
+    "+ synthetic (fitted simulator + RadarWeightNet)": ("test/acc_enhanced_synth", True),
     "synthetic only (fitted simulator)": ("test/acc_model_synth_only", True),
     "synthetic only (paper's simulator)": ("test/acc_model_synth_only", False),
     "real pool (ceiling)": ("test/acc_radar_pool", None),

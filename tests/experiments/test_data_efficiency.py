@@ -23,6 +23,7 @@ RECORDS = [
     rec(1, 1, "effects", radar_only=0.2, model_synth=0.5, model_synth_only=0.4, radar_pool=0.7),
     rec(1, 2, "effects", radar_only=0.3, model_synth=0.6, model_synth_only=0.5, radar_pool=0.7),
     rec(4, 1, "effects", radar_only=0.4, model_synth=0.7, model_synth_only=0.6, radar_pool=0.7),
+    rec(4, 1, "effects", enhanced_synth=0.75),  # RadarWeightNet's variant in a job of its own
     rec(4, 1, "none", model_synth_only=0.35),
     rec(1, 2, "none", model_synth_only=0.45),
     {"params": {"task_name": "few_shot_5pct", "split.fraction": "0.05"}, "metrics": {"test/acc_radar_only": 0.9}},
@@ -34,6 +35,7 @@ def test_curves_group_by_rows_and_simulator():
     assert got["radar only"] == {1: [0.2, 0.3], 4: [0.4]}
     assert got["+ synthetic (fitted simulator)"] == {1: [0.5, 0.6], 4: [0.7]}
     assert got["synthetic only (fitted simulator)"] == {1: [0.4, 0.5], 4: [0.6]}
+    assert got["+ synthetic (fitted simulator + RadarWeightNet)"] == {4: [0.75]}
     assert got["synthetic only (paper's simulator)"] == {0: [0.35, 0.45]}  # no real row involved
     assert got["real pool (ceiling)"] == {0: [0.7, 0.7]}  # one per seed, whatever k
     # an older run of the same point and seed (later in the list: records come latest first) is left out

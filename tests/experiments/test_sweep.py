@@ -64,8 +64,8 @@ def test_single_run_prints_table_and_run_dir_last(fake_data: Path, tmp_path: Pat
     lines = out.stdout.strip().splitlines()
     run_dir = Path(lines[-1])
     assert (run_dir / "metrics.json").is_file()
-    # the job's row of Table II (fixed test split), its RadarWeightNet guarded by held-out rows (the default)
-    assert any(line.startswith("| 50 %* [RadarWeightNet guarded, 2 folds] |") for line in lines)
+    # the job's row of Table II (fixed test split) on its data file, its RadarWeightNet guarded by held-out rows (the default)
+    assert any(line.startswith("| 50 %* {file: fake.h5} [RadarWeightNet guarded, 2 folds] |") for line in lines)
 
 
 def test_single_run_bad_input_exits_with_a_clear_error(tmp_path: Path):
