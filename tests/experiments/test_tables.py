@@ -21,6 +21,7 @@ def test_stats_and_cells():
     assert (m, n) == (pytest.approx(0.6), 3) and s == pytest.approx(0.1)
     assert mean_std([0.5, 0.6, 0.7]) == "0.600 ± 0.100 (n=3)"
     assert mean_std([0.25]) == "0.250" and mean_std([]) == "–"
+    assert mean_std([0.1, 0.3], signed=True) == "+0.200 ± 0.141 (n=2)" and mean_std([-0.1], signed=True) == "-0.100"
     assert math.isnan(stats([1.0])[1])
 
 
@@ -45,7 +46,7 @@ def test_build_tables_layout():
     assert "| 5 % | 0.450 ± 0.071 (n=2) | 0.650 ± 0.071 (n=2) | – | – |" in md
     assert "| 5 %* | – | – | – | 0.300 |" in md
     assert t3.sorted_rows() == ["10 classes, 5 % (external)", "5 classes, 10 % (external)"]
-    assert "| 10 classes, 5 % (external) | 0.300 | 0.500 | 0.200 |" in t3.markdown()
+    assert "| 10 classes, 5 % (external) | 0.300 | 0.500 | +0.200 |" in t3.markdown()
     assert "| 5 classes, 10 % (external) | – | 0.900 | – |" in t3.markdown()  # no scratch arm: no difference
     assert t4.sorted_rows() == ["hands (single → double)"]
     rows = list(csv.reader(io.StringIO(t2.csv())))
@@ -82,7 +83,7 @@ def test_build_tables_layout():
     (t3,) = build_tables([pre("1", "effects", 0.2, 0.5), pre("2", "effects", 0.4, 0.5), pre("1", "effects", 0.9, 0.9),
                           pre("1", "none", 0.2, 0.1)])
     assert t3.sorted_rows() == ["10 classes, 5 % (sfinge3d)", "10 classes, 5 % (sfinge3d) [fitted: effects]"]
-    assert "| 10 classes, 5 % (sfinge3d) [fitted: effects] | 0.300 ± 0.141 (n=2) | 0.500 ± 0.000 (n=2) | 0.200 ± 0.141 (n=2) |" in t3.markdown()
+    assert "| 10 classes, 5 % (sfinge3d) [fitted: effects] | 0.300 ± 0.141 (n=2) | 0.500 ± 0.000 (n=2) | +0.200 ± 0.141 (n=2) |" in t3.markdown()
     assert "| 10 classes, 5 % (sfinge3d) | 0.200 | 0.100 | -0.100 |" in t3.markdown()
     # one job's table (what train.py prints)
     assert job_table(_few(0.5), {"test/acc_radar_only": 0.9}).endswith("| 50 % | 0.900 | – | – | – | – | – | – |")

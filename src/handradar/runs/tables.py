@@ -60,6 +60,7 @@ class Table:
     rows: dict[str, dict[str, list[float]]] = field(default_factory=dict)  # row -> column -> values
     order: dict[str, tuple] = field(default_factory=dict)  # row -> sort key
     sources: dict[str, list[dict]] = field(default_factory=dict)  # row -> provenance of the runs behind it
+    signed: tuple[str, ...] = ()  # columns of differences: their cells show the sign
 
     def add(self, row: str, column: str, value: float, sort_key: tuple = (), source: Mapping | None = None) -> None:
         self.rows.setdefault(row, {}).setdefault(column, []).append(float(value))
@@ -88,7 +89,8 @@ class Table:
         lines = [f"**{self.title}**", "", "| | " + " | ".join(self.columns) + " |",
                  "|---|" + "---|" * len(self.columns)]
         for r in self.sorted_rows():
-            lines.append(f"| {r} | " + " | ".join(mean_std(self.rows[r].get(c, [])) for c in self.columns) + " |")
+            lines.append(f"| {r} | " + " | ".join(mean_std(self.rows[r].get(c, []), signed=c in self.signed)
+                                                   for c in self.columns) + " |")
         return "\n".join(lines)
 
     def csv(self) -> str:
@@ -171,13 +173,12 @@ def fmt_number(x: float | None, digits: int = 3, signed: bool = False) -> str:
     return f"{x:+.{digits}f}" if signed else f"{x:.{digits}f}"
 
 
-def mean_std(values: Sequence[float]) -> str:
+def mean_std(values: Sequence[float], signed: bool = False) -> str:
     m, s, n = stats(values)
     if n == 0:
         return "–"
-    if n == 1:
-        return f"{m:.3f}"
-    return f"{m:.3f} ± {s:.3f} (n={n})"
+    mean = fmt_number(m, signed=signed)
+    return mean if n == 1 else f"{mean} ± {s:.3f} (n={n})"
 
 
 def _pct(fraction: str | float) -> str:
@@ -221,7 +222,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
     few = Table("table2_few_shot", "Table II: few-shot accuracy (* = fixed test split of the complete dataset)",
                 variant_cols)
     pre = Table("table3_pretrain", "Table III: accuracy with and without pre-training on external synthetic data",
-                ["from scratch", "pre-trained", "pre-trained minus scratch"])
+                ["from scratch", "pre-trained", "pre-trained minus scratch"], signed=("pre-trained minus scratch",))
     ood = Table("table4_ood", "Table IV: out-of-distribution accuracy", variant_cols)
     seen: set[tuple] = set()  # (table, row, column, seed): records come latest first, the latest run counts
     for rec in records:
