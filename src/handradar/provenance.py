@@ -29,6 +29,22 @@ def code_version() -> str:
     return f"{__version__}+g{sha}{'.dirty' if dirty else ''}"
 
 
+def source_digest(root: Path) -> str:
+    """A digest (16 hex digits) of the Python source under ``root``: names and contents of its ``*.py`` files."""
+    h = hashlib.sha256()
+    for f in sorted(Path(root).rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+@functools.cache
+def package_digest() -> str:
+    """:func:`source_digest` of the handradar package: what a resumable result keyed by the code depends on.
+    Unlike the commit, it ignores commits to docs, tests and experiments, and it still tells two versions
+    apart outside a git checkout."""
+    return source_digest(Path(__file__).resolve().parent)
+
+
 def commit_of(version: str) -> str:
     """The short (7-digit) git commit in a ``<version>+g<sha>[.dirty]`` code version (``.dirty`` kept),
     else the version itself."""

@@ -69,7 +69,7 @@ from handradar.gap.job import headline_metrics, write_outputs
 from handradar.gap.records import benchmark_record, found, record_name, withheld, wrong_cause
 from handradar.gap.report import VERDICTS
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
-from handradar.provenance import code_version, config_hash, machine
+from handradar.provenance import code_version, config_hash, machine, package_digest
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.runs.hydra import command_line, group_choice, output_dir
@@ -478,7 +478,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         present = always_present(worlds.world)
         for case in cases(list(bench.cases)):
             key = config_hash("gap-benchmark-case", worlds.config(case), diag_cfg, sim_cfg, radar, chain,
-                              code_version())
+                              package_digest())  # the package's source: a docs-only commit keeps finished cases
             done = state / f"{case.name}-{key}.json"
             if done.is_file():
                 results.append({**json.loads(done.read_text()), "also_present": present})
