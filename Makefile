@@ -12,7 +12,7 @@ WORLD       ?= default
 SIZE        ?= 240
 COMMA       := ,
 
-.PHONY: help install smoke run test test-full bench sweep data-efficiency data-efficiency-figure tables mlflow-ui world world-gallery gap-benchmark gap-report fetch-data clean
+.PHONY: help install smoke run test test-full bench sweep data-efficiency data-efficiency-figure tables mlflow-ui world world-gallery gap-benchmark gap-report fetch-data prune-cache clean
 
 help: ## list the targets
 	@grep -E '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  make %-26s %s\n", $$1, $$2}'
@@ -76,6 +76,11 @@ gap-report: $(STAMP) ## the gap benchmark's summary table from results/gap_bench
 
 fetch-data: $(STAMP) ## SFINGE3D into data/sfinge3d (git clone; DHG: handradar-fetch dataset=dhg fetch.url=URL)
 	$(VENV)/bin/handradar-fetch dataset=sfinge3d $(ARGS)
+
+prune-cache: ## delete the per-bone slot profiles in .cache/ (most of its size; recomputed when a job needs them); not while jobs run
+	@du -sh .cache 2>/dev/null || true
+	find .cache -name 'slot_profiles-*.h5' -delete 2>/dev/null || true
+	@du -sh .cache 2>/dev/null || true
 
 clean: ## remove caches, logs and build files (keeps .venv)
 	rm -rf .cache logs outputs multirun .pytest_cache .hypothesis build *.egg-info src/*.egg-info
