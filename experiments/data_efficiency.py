@@ -103,7 +103,28 @@ def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None, data
     return {k: [f"seed {s}: {d}" for s, d in sorted(v.items())] for k, v in sorted(out.items())}
 
 
-def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int, list[str]]) -> str:
+RWN, MODEL = "+ synthetic (fitted simulator + RadarWeightNet)", "+ synthetic (fitted simulator)"
+
+
+def rwn_minus_model(records: Iterable[Mapping], data: str = "") -> dict[int, dict[str, float]]:
+    """{rows per gesture: {seed: + RadarWeightNet minus + model-based accuracy}}, paired within a seed (each
+    from its latest run; the two variants may come from separate jobs on the same split)."""
+    values: dict[tuple[str, int], dict[str, float]] = defaultdict(dict)
+    for rec in records:
+        p, m = rec["params"], rec["metrics"]
+        if ours(p, data) and p.get("synth.fit_sim", "none") not in ("none", "None"):
+            for name in (RWN, MODEL):
+                if CURVES[name][0] in m:
+                    values[(name, int(float(p["split.per_class"])))].setdefault(str(p.get("seed")), float(m[CURVES[name][0]]))
+    sizes = sorted({k for _, k in values})
+    return {k: {s: values[(RWN, k)][s] - values[(MODEL, k)][s] for s in sorted(values[(RWN, k)]) if s in values[(MODEL, k)]}
+            for k in sizes if any(s in values[(MODEL, k)] for s in values[(RWN, k)])}
+
+
+def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int, list[str]],
+             differences: Mapping[int, Mapping[str, float]] | None = None) -> str:
+    """The curve's table; with ``differences`` (:func:`rwn_minus_model`), a row of them per seed and the
+    sizes where one falls below 0 by more than the larger seed spread of the two curves."""
     sizes = sorted({k for name, points in data.items() if name != CEILING for k in points})
     lines = ["| real rows per gesture | " + " | ".join(str(k) for k in sizes) + " |",
              "|---|" + "---|" * len(sizes)]
@@ -111,6 +132,14 @@ def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int
         if name in data and name != CEILING:
             cells = [mean_std(data[name][k]) if k in data[name] else "–" for k in sizes]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    if differences:
+        cells = [" / ".join(f"{d:+.3f}" for d in differences[k].values()) if differences.get(k) else "–" for k in sizes]
+        lines.append("| RadarWeightNet minus model-based, per seed | " + " | ".join(cells) + " |")
+        spread = {k: max(stats(data[name].get(k, []))[1] for name in (RWN, MODEL)) for k in differences}
+        harm = [f"{k} ({min(d.values()):+.3f} against a spread of {spread[k]:.3f})" for k, d in differences.items()
+                if d and min(d.values()) < -spread[k]]
+        lines += ["", "RadarWeightNet below model-based by more than the larger seed spread at: "
+                  + (", ".join(harm) if harm else "no size") + "."]
     if CEILING in data:
         lines += ["", f"The {CEILING}, trained on the pool's real rows whatever k: {mean_std(data[CEILING][0])}."]
     if effects:
@@ -166,7 +195,7 @@ def main(argv: list[str] | None = None) -> Path:
                          if r["params"].get("task_name") == TASK} - {args.data})
         raise SystemExit(f"no finished {TASK} runs on {args.data or 'the default world'} in {args.tracking_uri}: "
                          f"run `make data-efficiency` first" + (f"; runs on other data: {others}" if others else ""))
-    print(markdown(data, fitted_effects(records, args.log_dir, args.data)))
+    print(markdown(data, fitted_effects(records, args.log_dir, args.data), rwn_minus_model(records, args.data)))
     out = plot(data, args.out, chance=1.0 / len(GESTURES))
     print(out)
     return out

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.data_efficiency import curves, fitted_effects, markdown, plot
+from experiments.data_efficiency import curves, fitted_effects, markdown, plot, rwn_minus_model
 from handradar.data.splits import few_shot_split
 from tests.tasks.fakes import compose_train
 
@@ -91,3 +91,20 @@ def test_preset_composes():
     cfg = compose_train(["+experiment=data_efficiency", "split.per_class=2"])
     assert cfg.task_name == "data_efficiency" and cfg.split.per_class == 2 and cfg.split.test == "fixed"
     assert list(cfg.variants) == ["radar_only", "model_synth", "model_synth_only"]  # the pool: once per seed
+
+
+def test_radarweightnet_minus_model_is_paired_by_seed_and_flags_harm():
+    records = [rec(4, 1, "effects", enhanced_synth=0.60), rec(4, 2, "effects", enhanced_synth=0.80),
+               rec(4, 1, "effects", model_synth=0.70), rec(4, 2, "effects", model_synth=0.70),
+               rec(4, 3, "effects", model_synth=0.70),  # no RadarWeightNet run of seed 3: not paired
+               rec(4, 1, "none", enhanced_synth=0.10)]  # the paper's simulator: not on the curve
+    diffs = rwn_minus_model(records)
+    assert list(diffs) == [4] and diffs[4] == pytest.approx({"1": -0.10, "2": +0.10})
+    md = markdown(curves(records), {}, diffs)
+    assert "| RadarWeightNet minus model-based, per seed | -0.100 / +0.100 |" in md
+    # seed spreads: RadarWeightNet 0.141, model-based 0.000: -0.100 is within the larger one
+    assert "RadarWeightNet below model-based by more than the larger seed spread at: no size." in md
+    tight = [rec(4, 1, "effects", enhanced_synth=0.60), rec(4, 2, "effects", enhanced_synth=0.62),
+             rec(4, 1, "effects", model_synth=0.70), rec(4, 2, "effects", model_synth=0.71)]
+    md = markdown(curves(tight), {}, rwn_minus_model(tight))
+    assert "at: 4 (-0.100 against a spread of 0.014)." in md
