@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from experiments.data_efficiency import curves, fitted_effects
+from experiments.data_efficiency import curves, fitted_effects, rwn_minus_model
 from experiments.data_efficiency import markdown as curve_markdown
 from handradar.atomic import atomic_write_text
 from handradar.provenance import REPO_ROOT
 from handradar.runs.mlflow import TAG_PREFIX, Tracker, sqlite_path
-from handradar.runs.tables import build_tables, provenance, results_markdown
+from handradar.runs.tables import build_tables, data_setting, provenance, results_markdown
 
 DEFAULT_URI = f"sqlite:///{REPO_ROOT / 'logs' / 'mlflow' / 'mlflow.db'}"
 log = logging.getLogger(__name__)
@@ -134,13 +134,19 @@ def main(argv: list[str] | None = None) -> Path:
     db = sqlite_path(args.tracking_uri)
     source = args.tracking_uri if db is None else _relative(db)
     md = results_markdown(tables, f"`{source}` ({len(records)} jobs)")
-    curve = curves(records)
-    if curve:  # the same runs as Table II's "k per class*" rows, as the curve and the fitted simulators
-        md += ("\n## Data efficiency\n\n`make data-efficiency` (`+experiment=data_efficiency`, seeds as counted, "
-               "`hydra/launcher=joblib`, `threads=1`); the latest run per point and seed. Under the curve, the "
+    # the same runs as Table II's "k per class*" rows, as the curve and the fitted simulators; one curve per data set
+    labels = sorted({data_setting(r["params"]).strip() for r in records if r["params"].get("task_name") == "data_efficiency"})
+    for label in labels:
+        curve = curves(records, label)
+        if not curve:
+            continue
+        md += (f"\n## Data efficiency{' on ' + label if label else ''}\n\n`make data-efficiency` "
+               "(`+experiment=data_efficiency`, seeds as counted, `hydra/launcher=joblib`, `threads=1`"
+               f"{'; the data as labelled' if label else ''}); the latest run per point and seed. Under the curve, the "
                "simulator each job fitted on its k rows per gesture, with the fit's held-out SSIM before and after "
                "its effects: where that stays flat as k grows, the simulator's residual gap, not the real rows, "
-               "limits synthetic-only training.\n\n" + curve_markdown(curve, fitted_effects(records, args.log_dir)))
+               "limits synthetic-only training.\n\n"
+               + curve_markdown(curve, fitted_effects(records, args.log_dir, label), rwn_minus_model(records, label)))
     atomic_write_text(args.doc, md)
     if not args.no_figures:
         write_confusions(args.tracking_uri, records, args.out)

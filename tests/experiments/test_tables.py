@@ -118,6 +118,8 @@ def test_tables_from_mlflow_runs(tmp_path: Path):
              "split": {"kind": "few_shot", "per_class": 1, "test": "fixed"}}
     _log_run(uri, "data_efficiency", curve, {"test/acc_radar_only": 0.15, "test/acc_model_synth": 0.6}, "d1",
              tmp=tmp_path)
+    mine = {**curve, "data": {"dataset": {"_target_": "handradar.data.datasets.RecordingsFolder", "root": "/d/mine"}}}
+    _log_run(uri, "data_efficiency", mine, {"test/acc_radar_only": 0.11}, "d2", tmp=tmp_path)
 
     out = tmp_path / "results"
     md = tables.main(["--tracking-uri", uri, "--out", str(out), "--doc", str(tmp_path / "results.md")])
@@ -127,7 +129,9 @@ def test_tables_from_mlflow_runs(tmp_path: Path):
     assert "| angle (0° → ±30°) | – | 0.420 | – | – |" in text
     assert "Table III" not in text
     # the data-efficiency runs again as the curve (the same runs as Table II's "1 per class*" row)
-    assert "## Data efficiency" in text and "| + synthetic (fitted simulator) | 0.600 |" in text
+    assert "## Data efficiency\n" in text and "| + synthetic (fitted simulator) | 0.600 |" in text
+    # a curve on recordings gets a section of its own
+    assert "## Data efficiency on {recordings: mine}" in text and "| radar only | 0.110 |" in text
     assert (out / "table2_few_shot.csv").is_file() and (out / "table4_ood.csv").is_file()
     png = out / "confusion" / "few_shot_20pct_radar_only.png"
     assert png.stat().st_size > 1000
