@@ -76,6 +76,27 @@ def test_recordings_source_ingests_once_per_content(tmp_path: Path, monkeypatch)
     (root / "r2" / "meta.json").write_text("changed content")
     os.utime(root / "r2" / "meta.json", ns=(1, 1))
     assert src.path() != first and len(calls) == 3  # a changed recording is ingested again
+    # two jobs of a sweep asking at once: one ingests, the other waits and reads the same file
+    import threading
+    import time
+
+    (root / "r1" / "meta.json").write_text("changed again")
+    os.utime(root / "r1" / "meta.json", ns=(2, 2))
+    slow = fake_ingest
+
+    def fake_ingest_slowly(*a, **kw):
+        time.sleep(0.3)
+        return slow(*a, **kw)
+
+    monkeypatch.setattr("handradar.data.datasets.ingest", fake_ingest_slowly)
+    got: list[Path] = []
+    jobs = [threading.Thread(target=lambda: got.append(RecordingsFolder(root, ChainConfig(), tmp_path / "cache").path()))
+            for _ in range(2)]
+    for j in jobs:
+        j.start()
+    for j in jobs:
+        j.join()
+    assert len(calls) == 4 and got[0] == got[1]
     shutil.rmtree(root)
     with pytest.raises(FormatError, match="recordings folder not found"):
         src.path()

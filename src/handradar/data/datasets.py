@@ -22,6 +22,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from handradar.atomic import file_lock
 from handradar.data.hdf5 import read_attrs, read_meta_group, validate
 from handradar.data.ingest import ingest
 from handradar.data.recording import FILES, find_recordings
@@ -87,13 +88,15 @@ class RecordingsFolder:
             what = "is a file, not a folder" if self.root.exists() else "recordings folder not found"
             raise FormatError(self.root, f"{what} (data.root: the folder that holds the recording folders)")
         out = self.cache_dir / f"recordings-{self.cache_key()}.h5"
-        if not out.is_file():
-            summary = ingest(self.root, out, self.chain, skeleton_rate_hz=self.skeleton_rate_hz, strict=self.strict,
-                             allow_truncated=self.allow_truncated, iq_swap=self.iq_swap,
-                             doppler_flip=self.doppler_flip, progress=False)
-            log.info("%s", summary.report())
-            if summary.convention.mirrored() or summary.convention.iq_swapped():
-                log.warning("%s", summary.convention.message())
+        # one ingest per content: a second job of a sweep waits, then reads the same file (and data hash)
+        with file_lock(out.with_name(out.name + ".lock")):
+            if not out.is_file():
+                summary = ingest(self.root, out, self.chain, skeleton_rate_hz=self.skeleton_rate_hz, strict=self.strict,
+                                 allow_truncated=self.allow_truncated, iq_swap=self.iq_swap,
+                                 doppler_flip=self.doppler_flip, progress=False)
+                log.info("%s", summary.report())
+                if summary.convention.mirrored() or summary.convention.iq_swapped():
+                    log.warning("%s", summary.convention.message())
         return out.resolve()
 
 
