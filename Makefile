@@ -79,7 +79,7 @@ fetch-data: $(STAMP) ## SFINGE3D into data/sfinge3d (git clone; DHG: handradar-f
 
 prune-cache: ## delete the per-bone slot profiles in .cache/ (most of its size; recomputed when a job needs them); not while jobs run
 	@du -sh .cache 2>/dev/null || true
-	find .cache -name 'slot_profiles-*.h5' -delete 2>/dev/null || true
+	find .cache \( -name 'slot_profiles-*.h5' -o -name '.slot_profiles-*.part' \) -delete 2>/dev/null || true
 	@du -sh .cache 2>/dev/null || true
 
 clean: ## remove caches, logs and build files (keeps .venv)

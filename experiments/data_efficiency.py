@@ -16,6 +16,7 @@ figure's path.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
@@ -25,7 +26,7 @@ from omegaconf import OmegaConf
 
 from handradar.provenance import REPO_ROOT
 from handradar.vocab import GESTURES
-from handradar.runs.tables import data_setting, mean_std, stats
+from handradar.runs.tables import data_setting, mean_std, stats, synthesis_setting
 from handradar.viz.common import pyplot, save_figure
 
 TASK = "data_efficiency"
@@ -41,9 +42,14 @@ CURVES = {
 CEILING = "real pool (ceiling)"  # the pool's real rows do not depend on k: one value per seed, kept at 0
 
 
-def ours(p: Mapping, data: str) -> bool:
-    """A data-efficiency run on ``data`` (a :func:`data_setting` label; "" the default world)."""
-    return p.get("task_name") == TASK and p.get("split.per_class") not in (None, "None") and data_setting(p).strip() == data.strip()
+def ours(rec: Mapping, data: str) -> bool:
+    """A data-efficiency run on ``data`` (a :func:`data_setting` label; "" the default world) whose synthetic
+    rows come from the fitted simulator (``synth.fit_sim=effects``) or the paper's (``none``), one draw per
+    row: the curve never mixes in another synthesis setting."""
+    p = rec["params"]
+    return (p.get("task_name") == TASK and p.get("split.per_class") not in (None, "None")
+            and data_setting(p, rec.get("tags")).strip() == data.strip()
+            and synthesis_setting(p) in ("", " [fitted: effects]"))
 
 
 def curves(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, list[float]]]:
@@ -54,7 +60,7 @@ def curves(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, li
     seen: set[tuple] = set()
     for rec in records:
         p, m = rec["params"], rec["metrics"]
-        if not ours(p, data):
+        if not ours(rec, data):
             continue
         k = int(float(p["split.per_class"]))
         fitted = p.get("synth.fit_sim", "none") not in ("none", "None")
@@ -96,7 +102,7 @@ def fitted_effects(records: Iterable[Mapping], log_dir: Path | None = None, data
     out: dict[int, dict[str, str]] = defaultdict(dict)
     for rec in records:  # latest first: the latest run per size and seed
         p = rec["params"]
-        if ours(p, data) and "synth.fitted.effects" in p:
+        if ours(rec, data) and "synth.fitted.effects" in p:
             described = _described(p, _state_file(rec, log_dir, "fitted_sim.yaml"),
                                    _state_file(rec, log_dir, "fit_report.json"))
             out[int(float(p["split.per_class"]))].setdefault(str(p.get("seed")), described)
@@ -112,7 +118,7 @@ def rwn_minus_model(records: Iterable[Mapping], data: str = "") -> dict[int, dic
     values: dict[tuple[str, int], dict[str, float]] = defaultdict(dict)
     for rec in records:
         p, m = rec["params"], rec["metrics"]
-        if ours(p, data) and p.get("synth.fit_sim", "none") not in ("none", "None"):
+        if ours(rec, data) and p.get("synth.fit_sim", "none") not in ("none", "None"):
             for name in (RWN, MODEL):
                 if CURVES[name][0] in m:
                     values[(name, int(float(p["split.per_class"])))].setdefault(str(p.get("seed")), float(m[CURVES[name][0]]))
@@ -133,13 +139,19 @@ def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int
             cells = [mean_std(data[name][k]) if k in data[name] else "–" for k in sizes]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
     if differences:
-        cells = [" / ".join(f"{d:+.3f}" for d in differences[k].values()) if differences.get(k) else "–" for k in sizes]
+        cells = [", ".join(f"s{seed} {d:+.3f}" for seed, d in sorted(differences[k].items(), key=lambda kv: int(kv[0])))
+                 if differences.get(k) else "–" for k in sizes]
         lines.append("| RadarWeightNet minus model-based, per seed | " + " | ".join(cells) + " |")
-        spread = {k: max(stats(data[name].get(k, []))[1] for name in (RWN, MODEL)) for k in differences}
-        harm = [f"{k} ({min(d.values()):+.3f} against a spread of {spread[k]:.3f})" for k, d in differences.items()
-                if d and min(d.values()) < -spread[k]]
+        harm, unjudged = [], []
+        for k, d in differences.items():
+            spreads = [sd for name in (RWN, MODEL) if not math.isnan(sd := stats(data.get(name, {}).get(k, []))[1])]
+            if not spreads:  # fewer than 2 seeds on both curves: no spread to judge by
+                unjudged.append(str(k))
+            elif d and min(d.values()) < -max(spreads):
+                harm.append(f"{k} ({min(d.values()):+.3f} against a spread of {max(spreads):.3f})")
         lines += ["", "RadarWeightNet below model-based by more than the larger seed spread at: "
-                  + (", ".join(harm) if harm else "no size") + "."]
+                  + (", ".join(harm) if harm else "no size") + "."
+                  + (f" Too few seeds to judge at: {', '.join(unjudged)}." if unjudged else "")]
     if CEILING in data:
         lines += ["", f"The {CEILING}, trained on the pool's real rows whatever k: {mean_std(data[CEILING][0])}."]
     if effects:
@@ -191,7 +203,7 @@ def main(argv: list[str] | None = None) -> Path:
     records = load_records(args.tracking_uri)
     data = curves(records, args.data)
     if not data:
-        others = sorted({data_setting(r["params"]).strip() or "the default world" for r in records
+        others = sorted({data_setting(r["params"], r.get("tags")).strip() or "the default world" for r in records
                          if r["params"].get("task_name") == TASK} - {args.data})
         raise SystemExit(f"no finished {TASK} runs on {args.data or 'the default world'} in {args.tracking_uri}: "
                          f"run `make data-efficiency` first" + (f"; runs on other data: {others}" if others else ""))

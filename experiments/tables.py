@@ -135,7 +135,8 @@ def main(argv: list[str] | None = None) -> Path:
     source = args.tracking_uri if db is None else _relative(db)
     md = results_markdown(tables, f"`{source}` ({len(records)} jobs)")
     # the same runs as Table II's "k per class*" rows, as the curve and the fitted simulators; one curve per data set
-    labels = sorted({data_setting(r["params"]).strip() for r in records if r["params"].get("task_name") == "data_efficiency"})
+    labels = sorted({data_setting(r["params"], r.get("tags")).strip() for r in records
+                     if r["params"].get("task_name") == "data_efficiency"})
     for label in labels:
         curve = curves(records, label)
         if not curve:

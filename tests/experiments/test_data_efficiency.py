@@ -48,6 +48,9 @@ def test_curves_group_by_rows_and_simulator():
     mine["params"].update({"data.dataset._target_": "handradar.data.datasets.RecordingsFolder", "data.dataset.root": "/d/mine"})
     assert curves([mine, *RECORDS]) == curves(RECORDS)
     assert curves([mine, *RECORDS], "{recordings: mine}") == {"radar only": {1: [0.1]}}
+    heldout = {**rec(1, 1, "effects", radar_only=0.3), "tags": {"handradar.world": "heldout"}}
+    assert curves([heldout, *RECORDS]) == curves(RECORDS)
+    assert curves([heldout], "{world: heldout}") == {"radar only": {1: [0.3]}}
     assert fitted_effects([mine, *RECORDS], data="{recordings: mine}") == {1: ["seed 1: -"]}
 
 
@@ -101,10 +104,17 @@ def test_radarweightnet_minus_model_is_paired_by_seed_and_flags_harm():
     diffs = rwn_minus_model(records)
     assert list(diffs) == [4] and diffs[4] == pytest.approx({"1": -0.10, "2": +0.10})
     md = markdown(curves(records), {}, diffs)
-    assert "| RadarWeightNet minus model-based, per seed | -0.100 / +0.100 |" in md
+    assert "| RadarWeightNet minus model-based, per seed | s1 -0.100, s2 +0.100 |" in md
     # seed spreads: RadarWeightNet 0.141, model-based 0.000: -0.100 is within the larger one
     assert "RadarWeightNet below model-based by more than the larger seed spread at: no size." in md
     tight = [rec(4, 1, "effects", enhanced_synth=0.60), rec(4, 2, "effects", enhanced_synth=0.62),
              rec(4, 1, "effects", model_synth=0.70), rec(4, 2, "effects", model_synth=0.71)]
     md = markdown(curves(tight), {}, rwn_minus_model(tight))
     assert "at: 4 (-0.100 against a spread of 0.014)." in md
+    # one seed on both curves: no spread, so not judged (and not reported as harmless)
+    single = tight[::2]
+    assert "at: no size. Too few seeds to judge at: 4." in markdown(curves(single), {}, rwn_minus_model(single))
+    # another synthesis setting (several draws per skeleton) never enters the curve
+    drawn = rec(4, 1, "effects", model_synth=0.99)
+    drawn["params"]["synth.samples_per_row"] = "2"
+    assert curves([drawn, *tight])["+ synthetic (fitted simulator)"] == {4: [0.70, 0.71]}

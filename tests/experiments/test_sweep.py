@@ -90,7 +90,7 @@ def test_parallel_joblib_sweep_logs_every_run(fake_data: Path, tmp_path: Path):
     assert len(runs) == 4
     assert sorted(r.data.tags["handradar.seed"] for r in runs) == ["1", "2", "3", "4"]
     for r in runs:
-        assert r.info.status == "FINISHED"
+        assert r.info.status == "FINISHED" and r.data.tags["handradar.world"] == "default"  # make tables: worlds apart
         assert PAPER_METRICS <= set(r.data.metrics)
         assert len(client.get_metric_history(r.info.run_id, "radar_only/train/loss")) >= 1
 

@@ -74,7 +74,11 @@ def test_build_tables_layout():
                                          "data.dataset.root": "/data/mine"}, "metrics": {"test/acc_radar_only": 0.9}},
                              {"params": {**_few(0.05, "fixed"), "seed": "1", "data.dataset.world.seed": "101"},
                               "metrics": {"test/acc_radar_only": 0.7}}])
-    assert sorted(other.sorted_rows()) == ["5 %*", "5 %* {recordings: mine}", "5 %* {world seed 101}"]
+    assert sorted(other.sorted_rows()) == ["5 %*", "5 %* {recordings: mine}", "5 %* {world: seed 101}"]
+    # a world is named by the job's Hydra choice (tag), whatever its seed
+    (tagged,) = build_tables([{"params": {**_few(0.05, "fixed")}, "tags": {"handradar.world": "strong_jitter"},
+                               "metrics": {"test/acc_radar_only": 0.3}}])
+    assert tagged.sorted_rows() == ["5 %* {world: strong_jitter}"]
     assert "| 5 %* | 0.300 |" in other.markdown()
     # Table III: a row per simulator; the difference is paired within each seed's job; the latest job of a seed counts
     def pre(seed: str, fit: str, scratch: float, pretrained: float) -> dict:

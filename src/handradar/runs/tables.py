@@ -202,16 +202,21 @@ def synthesis_setting(p: Mapping[str, str], metrics: Mapping[str, float] | None 
     return f" [{', '.join(parts)}]" if parts else ""
 
 
-def data_setting(p: Mapping[str, str]) -> str:
-    """Which data a job trained and tested on, when not the default reference world (``world.seed`` 0):
-    rows of other data are never averaged with its (e.g. " {recordings: mine}", " {world seed 101}")."""
+def data_setting(p: Mapping[str, str], tags: Mapping[str, str] | None = None) -> str:
+    """Which data a job trained and tested on, when not the default reference world: rows of other data
+    are never averaged with its (" {recordings: mine}", " {file: mine.h5}", " {world: heldout}"). A world
+    is named by the job's ``handradar.world`` tag (its Hydra choice), else, for runs logged before the tag,
+    by its seed (0: the default world)."""
     target = p.get("data.dataset._target_", "")
     if target.endswith("RecordingsFolder"):
         return f" {{recordings: {PurePath(p.get('data.dataset.root', '?')).name}}}"
     if target.endswith("DatasetFile"):
         return f" {{file: {PurePath(p.get('data.dataset.path', '?')).name}}}"
-    seed = p.get("data.dataset.world.seed", "0")
-    return "" if seed in ("0", "None") else f" {{world seed {seed}}}"
+    world = (tags or {}).get("handradar.world")
+    if world is None:
+        seed = p.get("data.dataset.world.seed", "0")
+        world = "default" if seed in ("0", "None") else f"seed {seed}"
+    return "" if world == "default" else f" {{world: {world}}}"
 
 
 def build_tables(records: Iterable[Mapping]) -> list[Table]:
@@ -233,12 +238,13 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
                 for key, label in SYNTH_COLUMNS:
                     value = metrics.get(f"test/{key}{suffix}")
                     if value is not None:
-                        synth.add(row + data_setting(p), label, value, (i, data_setting(p)), rec.get("provenance"))
+                        where = data_setting(p, rec.get("tags"))
+                        synth.add(row + where, label, value, (i, where), rec.get("provenance"))
             continue
         if p.get("job") not in ("variants", "external_pretrain"):
             continue  # not a train.py job
         if p.get("job") == "external_pretrain":
-            source, setting = p.get("pretrain.source", "external"), data_setting(p) + synthesis_setting(p)
+            source, setting = p.get("pretrain.source", "external"), data_setting(p, rec.get("tags")) + synthesis_setting(p)
             found: dict[tuple[str, str], dict[str, float]] = {}  # (classes, pct) -> init -> accuracy
             for name, value in metrics.items():
                 m = PRETRAIN_METRIC.match(name)
@@ -270,7 +276,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             row, table, key = _pct(p["split.fraction"]) + ("*" if fixed else ""), few, (fixed, float(p["split.fraction"]))
         else:
             continue
-        setting = data_setting(p) + synthesis_setting(p, metrics)
+        setting = data_setting(p, rec.get("tags")) + synthesis_setting(p, metrics)
         row, key = row + setting, (*key, setting)
         for variant, label in VARIANT_COLUMNS:
             value = metrics.get(f"test/acc_{variant}")

@@ -70,6 +70,7 @@ from handradar.gap.job import fit_simulator
 from handradar.gap.report import GENERIC_SETTINGS, write_report
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import code_version, config_hash
+from handradar.runs.hydra import group_choice
 from handradar.runs.mlflow import DataRef, Tracker, flatten, tracked_run
 from handradar.runs.progress import Stages
 from handradar.runs.tables import job_table
@@ -203,7 +204,8 @@ class Job:
             if self.rank_zero:
                 self.tracker = instantiate(cfg.logger) if cfg.get("logger") else self.tracker
             tags = {"preset": cfg.task_name, "seed": self.seed, "job_hash": jhash, "data_hash": data_hash,
-                    "code_version": code_version(), "run_dir": self.run_dir, "data_path": real_path}
+                    "code_version": code_version(), "run_dir": self.run_dir, "data_path": real_path,
+                    **({"world": world} if (world := group_choice("world")) else {})}  # make tables keeps worlds apart
             config = OmegaConf.to_container(cfg, resolve=True) if self.rank_zero else None
             data = DataRef.of(OmegaConf.to_container(cfg.data, resolve=True), real_path, data_hash)
             with tracked_run(self.tracker, run_name=data.run_name(cfg.task_name, self.seed), tags=tags, config=config,
