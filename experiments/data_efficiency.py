@@ -165,7 +165,8 @@ def plot(data: Mapping[str, Mapping[int, list[float]]], path: str | Path, *, cha
     fig, ax = pyplot().subplots(figsize=(6.0, 3.8), dpi=120)
     sizes = sorted({k for name, pts in data.items() for k in pts if k > 0})
     zero_x = (sizes[0] / 2) if sizes else 0.5
-    for name, points in data.items():
+    for name in (n for n in CURVES if n in data):  # a fixed order: the same colour for a curve in every figure
+        points = data[name]
         ks = sorted(points)
         xs = [k if k > 0 else zero_x for k in ks]
         m = [stats(points[k])[0] for k in ks]
