@@ -489,13 +489,6 @@ class Job:
         return gx, gy
 
     # ---- external pre-training --------------------------------------------------------------
-    def external_source(self) -> tuple[str, Any]:
-        data = self.cfg.data
-        dhg = data.get("dhg")
-        if dhg is not None and dhg.get("root"):
-            return "dhg", dhg
-        return "sfinge3d", data.sfinge3d
-
     def finetune_split(self, fraction: float) -> Split:
         """The few-shot split of every class at ``fraction`` (the unstarred protocol); a class subset's
         fine-tune takes its classes' rows of it, so one seed's splits are nested across fractions and
@@ -506,7 +499,7 @@ class Job:
         f = self.state / "pretrain" / "backbone.pt"
         if f.is_file():
             return torch.load(f, map_location="cpu")
-        source, source_cfg = self.external_source()
+        source, source_cfg = external_source(self.cfg)
         provider = instantiate(self.cfg.synth.external_provider)
         # the closed loop: the radar's calibration and the Leap tracker's smoothing, fitted on the rows that
         # train every fine-tune (the smallest fraction's), carry over to the external skeletons
@@ -557,6 +550,14 @@ class Job:
         return results
 
 
+def external_source(cfg: DictConfig) -> tuple[str, Any]:
+    """The external skeleton dataset Table III pre-trains on: DHG when ``data.dhg.root`` is set, else SFINGE3D."""
+    dhg = cfg.data.get("dhg")
+    if dhg is not None and dhg.get("root"):
+        return "dhg", dhg
+    return "sfinge3d", cfg.data.sfinge3d
+
+
 def run(cfg: DictConfig, run_dir: str | Path | None = None) -> Path:
     """Run one job; returns its run directory (Hydra's output folder unless given)."""
     if run_dir is None:
@@ -574,6 +575,8 @@ def run(cfg: DictConfig, run_dir: str | Path | None = None) -> Path:
         raise
     if _is_rank_zero() and cfg.get("print_table", True):
         params = {k: str(v) for k, v in flatten(OmegaConf.to_container(cfg, resolve=True)).items()}
+        if cfg.get("job") == "external_pretrain":  # the row's label, as the MLflow run has it
+            params["pretrain.source"] = external_source(cfg)[0]
         print(job_table(params, metrics), flush=True)
         summary = run_dir / "figures" / "summary.png"
         if summary.is_file():
