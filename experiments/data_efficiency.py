@@ -52,12 +52,17 @@ def ours(rec: Mapping, data: str) -> bool:
             and synthesis_setting(p) in ("", " [fitted: effects]"))
 
 
-def curves(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, list[float]]]:
-    """{curve: {rows per gesture: [accuracy per seed]}} of the data-efficiency runs on ``data`` among
-    ``records`` (``{"params": flat config, "metrics": {...}}``, latest first: one value per curve, point and
-    seed, the latest run's); the paper's simulator's points, and the ceiling's (one per seed), sit at 0."""
-    out: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
-    seen: set[tuple] = set()
+def data_labels(records: Iterable[Mapping]) -> list[str]:
+    """The data sets (:func:`data_setting` labels, "" the default world) that data-efficiency runs used."""
+    return sorted({data_setting(r["params"], r.get("tags")).strip() for r in records
+                   if r["params"].get("task_name") == TASK})
+
+
+def seed_points(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, dict[str, float]]]:
+    """{curve: {rows per gesture: {seed: accuracy}}} of the data-efficiency runs on ``data`` among
+    ``records`` (``{"params": flat config, "metrics": {...}}``, latest first: the latest run's value per
+    curve, point and seed); the paper's simulator's points, and the ceiling's (one per seed), sit at 0."""
+    out: dict[str, dict[int, dict[str, float]]] = defaultdict(lambda: defaultdict(dict))
     for rec in records:
         p, m = rec["params"], rec["metrics"]
         if not ours(rec, data):
@@ -66,10 +71,15 @@ def curves(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, li
         fitted = p.get("synth.fit_sim", "none") not in ("none", "None")
         for name, (metric, wants_fit) in CURVES.items():
             point = 0 if wants_fit is False or name == CEILING else k
-            if metric in m and (wants_fit is None or wants_fit == fitted) and (name, point, p.get("seed")) not in seen:
-                seen.add((name, point, p.get("seed")))
-                out[name][point].append(float(m[metric]))
+            if metric in m and (wants_fit is None or wants_fit == fitted):
+                out[name][point].setdefault(str(p.get("seed")), float(m[metric]))
     return {name: dict(sorted(points.items())) for name, points in out.items()}
+
+
+def curves(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, list[float]]]:
+    """{curve: {rows per gesture: [accuracy per seed]}}: :func:`seed_points` without the seeds."""
+    return {name: {k: list(by_seed.values()) for k, by_seed in points.items()}
+            for name, points in seed_points(records, data).items()}
 
 
 def _state_file(rec: Mapping, log_dir: Path | None, name: str) -> dict | None:
@@ -115,16 +125,10 @@ RWN, MODEL = "+ synthetic (fitted simulator + RadarWeightNet)", "+ synthetic (fi
 def rwn_minus_model(records: Iterable[Mapping], data: str = "") -> dict[int, dict[str, float]]:
     """{rows per gesture: {seed: + RadarWeightNet minus + model-based accuracy}}, paired within a seed (each
     from its latest run; the two variants may come from separate jobs on the same split)."""
-    values: dict[tuple[str, int], dict[str, float]] = defaultdict(dict)
-    for rec in records:
-        p, m = rec["params"], rec["metrics"]
-        if ours(rec, data) and p.get("synth.fit_sim", "none") not in ("none", "None"):
-            for name in (RWN, MODEL):
-                if CURVES[name][0] in m:
-                    values[(name, int(float(p["split.per_class"])))].setdefault(str(p.get("seed")), float(m[CURVES[name][0]]))
-    sizes = sorted({k for _, k in values})
-    return {k: {s: values[(RWN, k)][s] - values[(MODEL, k)][s] for s in sorted(values[(RWN, k)]) if s in values[(MODEL, k)]}
-            for k in sizes if any(s in values[(MODEL, k)] for s in values[(RWN, k)])}
+    pts = seed_points(records, data)
+    rwn, model = pts.get(RWN, {}), pts.get(MODEL, {})
+    out = {k: {s: v - model[k][s] for s, v in sorted(rwn[k].items()) if s in model.get(k, {})} for k in rwn}
+    return {k: d for k, d in out.items() if d}
 
 
 def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int, list[str]],
@@ -204,8 +208,7 @@ def main(argv: list[str] | None = None) -> Path:
     records = load_records(args.tracking_uri)
     data = curves(records, args.data)
     if not data:
-        others = sorted({data_setting(r["params"], r.get("tags")).strip() or "the default world" for r in records
-                         if r["params"].get("task_name") == TASK} - {args.data})
+        others = [label or "the default world" for label in data_labels(records) if label != args.data.strip()]
         raise SystemExit(f"no finished {TASK} runs on {args.data or 'the default world'} in {args.tracking_uri}: "
                          f"run `make data-efficiency` first" + (f"; runs on other data: {others}" if others else ""))
     print(markdown(data, fitted_effects(records, args.log_dir, args.data), rwn_minus_model(records, args.data)))

@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from experiments.data_efficiency import curves, fitted_effects, rwn_minus_model
+from experiments.data_efficiency import curves, data_labels, fitted_effects, rwn_minus_model
 from experiments.data_efficiency import markdown as curve_markdown
 from handradar.atomic import atomic_write_text
 from handradar.provenance import REPO_ROOT
 from handradar.runs.mlflow import TAG_PREFIX, Tracker, sqlite_path
-from handradar.runs.tables import build_tables, data_setting, provenance, results_markdown
+from handradar.runs.tables import build_tables, provenance, results_markdown
 
 DEFAULT_URI = f"sqlite:///{REPO_ROOT / 'logs' / 'mlflow' / 'mlflow.db'}"
 log = logging.getLogger(__name__)
@@ -135,9 +135,7 @@ def main(argv: list[str] | None = None) -> Path:
     source = args.tracking_uri if db is None else _relative(db)
     md = results_markdown(tables, f"`{source}` ({len(records)} jobs)")
     # the same runs as Table II's "k per class*" rows, as the curve and the fitted simulators; one curve per data set
-    labels = sorted({data_setting(r["params"], r.get("tags")).strip() for r in records
-                     if r["params"].get("task_name") == "data_efficiency"})
-    for label in labels:
+    for label in data_labels(records):
         curve = curves(records, label)
         if not curve:
             continue

@@ -232,19 +232,18 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
     seen: set[tuple] = set()  # (table, row, column, seed): records come latest first, the latest run counts
     for rec in records:
         p, metrics = rec["params"], rec["metrics"]
-        kind = p.get("split.kind", "few_shot")
+        kind, where = p.get("split.kind", "few_shot"), data_setting(p, rec.get("tags"))
         if p.get("job") == SYNTH_JOB:
             for i, (suffix, row) in enumerate(SYNTH_ROWS):
                 for key, label in SYNTH_COLUMNS:
                     value = metrics.get(f"test/{key}{suffix}")
                     if value is not None:
-                        where = data_setting(p, rec.get("tags"))
                         synth.add(row + where, label, value, (i, where), rec.get("provenance"))
             continue
         if p.get("job") not in ("variants", "external_pretrain"):
             continue  # not a train.py job
         if p.get("job") == "external_pretrain":
-            source, setting = p.get("pretrain.source", "external"), data_setting(p, rec.get("tags")) + synthesis_setting(p)
+            source, setting = p.get("pretrain.source", "external"), where + synthesis_setting(p)
             found: dict[tuple[str, str], dict[str, float]] = {}  # (classes, pct) -> init -> accuracy
             for name, value in metrics.items():
                 m = PRETRAIN_METRIC.match(name)
@@ -276,7 +275,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             row, table, key = _pct(p["split.fraction"]) + ("*" if fixed else ""), few, (fixed, float(p["split.fraction"]))
         else:
             continue
-        setting = data_setting(p, rec.get("tags")) + synthesis_setting(p, metrics)
+        setting = where + synthesis_setting(p, metrics)
         row, key = row + setting, (*key, setting)
         for variant, label in VARIANT_COLUMNS:
             value = metrics.get(f"test/acc_{variant}")
