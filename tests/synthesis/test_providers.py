@@ -21,6 +21,7 @@ from handradar.sim.simulator import Simulator
 from handradar.synthesis.fit import (
     Phase,
     Shrunk,
+    choose_shrink,
     fit_weight_net,
     guarded_weight_net,
     load_pairs,
@@ -124,6 +125,22 @@ def test_guarded_weight_net_keeps_what_helps_held_out_and_shrinks_what_does_not(
     torch.testing.assert_close(predict(sim, net, plain), predict(sim, None, plain), atol=1e-5, rtol=0)
     with pytest.raises(ValueError, match="shrink"):
         Shrunk(net.net, 1.5)
+
+
+def test_choose_shrink_keeps_the_best_shrink_only_when_its_heldout_gain_clears_zero():
+    """Closed-form rows: a gain every row shares is kept; the same mean gain made of large gains and
+    losses that cancel (its bootstrap CI spans 0) falls back to shrink 0, the modelling-only simulator."""
+    model = np.full(40, 0.5)
+    steady = {0.0: model, 0.5: np.full(40, 0.55), 1.0: np.full(40, 0.6)}
+    shrink, report = choose_shrink(model, steady, n_boot=500)
+    assert shrink == 1.0 and report["shrink_best_ssim"] == 1.0
+    assert report["gain"] == pytest.approx(0.2) and report["gain_chosen_ci95"][0] > 0
+    noisy = {0.0: model, 0.5: model + 0.0005, 1.0: np.tile([0.79, 0.23], 20)}  # mean 0.51: gain 0.02
+    shrink, report = choose_shrink(model, noisy, n_boot=500)
+    assert report["shrink_best_ssim"] == 1.0 and report["gain_chosen_ci95"][0] < 0 < report["gain_chosen_ci95"][1]
+    assert shrink == 0.0 and report["shrink"] == 0.0
+    worse = {0.0: model, 1.0: np.full(40, 0.4)}
+    assert choose_shrink(model, worse, n_boot=500)[0] == 0.0
 
 
 def test_fit_is_reproducible_and_resumable(measured, radar, short_chain, tmp_path):

@@ -18,6 +18,7 @@ Public API:
     SynthFitModule(sim, net, phases)                                     the LightningModule
     fit_weight_net(sim, train: Pairs, *, phases, seed, ...) -> RadarWeightNet   the one training loop
     guarded_weight_net(sim, train: Pairs, labels, *, folds, ...) -> (Shrunk, report)   fitted with held-out rows
+    choose_shrink(model, held) -> (shrink, report)                         its rule, from per-row held-out SSIM
     Shrunk(net, shrink)                                                    weights 1 + shrink (w - 1)
     predict(sim, net | None, pairs, batch_size=32) -> (N, 64, 32)         None: modelling only
     predict_cached(sim, net | None, caches, rows, batch_size=32) -> (N, 64, 32)   streamed from the caches
@@ -262,6 +263,24 @@ class Shrunk(torch.nn.Module):
 
 
 SHRINKS = (0.0, 0.25, 0.5, 0.75, 1.0)
+GUARD_RULE = "best shrink if its CI clears 0"  # in the synthetic files' cache key: a new rule never reuses old files
+
+
+def choose_shrink(model: np.ndarray, held: dict[float, np.ndarray], *, n_boot: int = 1000,
+                  seed: int = 0) -> tuple[float, dict]:
+    """The shrink a guarded RadarWeightNet applies, from per-row held-out SSIM: ``model`` of the
+    modelling-only simulator, ``held[s]`` of the network shrunk by s. The shrink with the highest mean
+    is kept only when its held-out gain (gap_closed against ``model``, 95 % paired-bootstrap CI) has a
+    CI above 0; otherwise 0, the modelling-only simulator: a gain the rows cannot tell from noise is not
+    worth the network's risk (docs/configuration.md#training-jobs)."""
+    means = {lam: float(v.mean()) for lam, v in held.items()}
+    best = max(held, key=lambda lam: (means[lam], -lam))  # ties: the smaller shrink
+    gain = bootstrap_gap_closed(model, held[max(held)], n_boot=n_boot, seed=seed)
+    chosen = bootstrap_gap_closed(model, held[best], n_boot=n_boot, seed=seed)
+    shrink = best if best > 0 and chosen.ci95[0] > 0 else 0.0
+    return shrink, {"heldout_ssim": {str(lam): m for lam, m in means.items()}, "shrink": shrink,
+                    "shrink_best_ssim": best, "gain": gain.estimate, "gain_ci95": list(gain.ci95),
+                    "gain_chosen": chosen.estimate, "gain_chosen_ci95": list(chosen.ci95)}
 
 
 def guarded_weight_net(sim: Simulator, train: Pairs, labels: np.ndarray, *, folds: int = 2,
@@ -269,12 +288,14 @@ def guarded_weight_net(sim: Simulator, train: Pairs, labels: np.ndarray, *, fold
                        net_kwargs: dict | None = None, n_boot: int = 1000) -> tuple[Shrunk, dict]:
     """RadarWeightNet that knows when it does not help: ``folds`` networks, each trained on the other
     folds of ``train`` (stratified by ``labels``), score every shrink toward weight 1 on their held-out
-    rows; the shrink with the highest held-out mean SSIM is applied to one more network trained on all
-    rows. Where held-out SSIM does not improve the shrink is 0: the modelling-only simulator.
+    rows; :func:`choose_shrink` picks the shrink (the best held-out SSIM, when its gain's CI clears 0),
+    which is applied to one more network trained on all rows. Shrink 0 is the modelling-only simulator,
+    and then no final network is trained.
 
-    The report: per shrink the held-out mean SSIM; the chosen shrink; ``gain``: the held-out gap_closed
-    [95 % paired-bootstrap CI] of the unshrunk network (1 - SSIM of the modelling-only simulator is the
-    gap) and ``gain_chosen`` of the chosen shrink (optimistic: chosen on those rows)."""
+    The report: :func:`choose_shrink`'s (per shrink the held-out mean SSIM; the applied ``shrink`` and the
+    best by SSIM; ``gain``: the held-out gap_closed [95 % CI] of the unshrunk network, 1 - SSIM of the
+    modelling-only simulator being the gap; ``gain_chosen`` of the best shrink, optimistic: chosen on those
+    rows), with ``folds`` and ``rows``."""
     labels = np.asarray(labels)
     parts = stratified_partition(labels, [1.0 / folds] * folds, seed, every_part=True)
     held = {lam: np.zeros(len(train)) for lam in shrinks}
@@ -284,17 +305,12 @@ def guarded_weight_net(sim: Simulator, train: Pairs, labels: np.ndarray, *, fold
         held_out = train.subset(test)
         for lam in shrinks:
             held[lam][test] = per_example_ssim(held_out.targets, predict(sim, Shrunk(net, lam), held_out))
-    means = {lam: float(v.mean()) for lam, v in held.items()}
-    best = max(shrinks, key=lambda lam: (means[lam], -lam))  # ties: the smaller shrink
     model = held[0.0] if 0.0 in held else per_example_ssim(train.targets, predict(sim, None, train))
-    gain = bootstrap_gap_closed(model, held[max(shrinks)], n_boot=n_boot, seed=seed)
-    chosen = bootstrap_gap_closed(model, held[best], n_boot=n_boot, seed=seed)
-    report = {"folds": folds, "rows": len(train), "heldout_ssim": {str(lam): m for lam, m in means.items()},
-              "shrink": best, "gain": gain.estimate, "gain_ci95": list(gain.ci95),
-              "gain_chosen": chosen.estimate, "gain_chosen_ci95": list(chosen.ci95)}
-    net = fit_weight_net(sim, train, phases=phases, seed=seed, net_kwargs=net_kwargs) if best > 0 else \
+    shrink, choice = choose_shrink(model, held, n_boot=n_boot, seed=seed)
+    report = {"folds": folds, "rows": len(train), **choice}
+    net = fit_weight_net(sim, train, phases=phases, seed=seed, net_kwargs=net_kwargs) if shrink > 0 else \
         RadarWeightNet(**(net_kwargs or {})).eval()
-    return Shrunk(net, best).eval(), report
+    return Shrunk(net, shrink).eval(), report
 
 
 def save_weight_net(path: str | Path, net: RadarWeightNet, sim: Simulator, net_kwargs: dict | None = None) -> Path:

@@ -67,6 +67,7 @@ from handradar.sim.factory import SimFactory
 from handradar.sim.features import cached_bone_features
 from handradar.sim.simulator import Simulator
 from handradar.synthesis.fit import (
+    GUARD_RULE,
     Phase,
     fit_weight_net,
     guarded_weight_net,
@@ -172,7 +173,7 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
 
     key = config_hash(file_hash(real_path), rows.tolist(), mode, fit_rows.tolist() if mode == "enhanced" else None,
                       seed, simulator.key(), [asdict(p) for p in phases] if mode == "enhanced" else None,
-                      net_kwargs or {}, *([guard_folds] if mode == "enhanced" and guard_folds else []))
+                      net_kwargs or {}, *([guard_folds, GUARD_RULE] if mode == "enhanced" and guard_folds else []))
     out = Path(cache_dir) / f"synthetic-{mode}-{key}.h5"
     if out.is_file():
         return out
