@@ -43,7 +43,6 @@ The defaults are :func:`synthesize_rows` and :func:`synthesize_external` (conf/t
 from __future__ import annotations
 
 import json
-import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -77,7 +76,6 @@ from handradar.synthesis.fit import (
     schedule,
 )
 
-log = logging.getLogger(__name__)
 
 SimSpec = DictConfig | Mapping | Simulator | None  # the ``sim`` config, a built simulator, or None (the paper's)
 
@@ -193,10 +191,7 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
                 labels = h5["labels"][()][fit_rows]
             net, report = guarded_weight_net(simulator, train, labels, folds=guard_folds, phases=phases, seed=seed,
                                              net_kwargs=net_kwargs)
-            log.info("RadarWeightNet with %d held-out folds of %d rows: held-out gain %+.3f [%+.3f, %+.3f] as "
-                     "trained; kept at s = %g (weights 1 + s (w - 1); 0: the modelling-only simulator)", guard_folds,
-                     len(fit_rows), report["gain"], *report["gain_ci95"], report["shrink"])
-            extra = {"rwn_guard": json.dumps(report)}
+            extra = {"rwn_guard": json.dumps(report)}  # train.py logs it (Job.log_rwn_guard)
         else:
             net = fit_weight_net(simulator, train, phases=phases, seed=seed, net_kwargs=net_kwargs)
         del train

@@ -404,8 +404,8 @@ class Job:
                                   g["gain_ci95"][0], f"synth/rwn_shrink{tag}": g["shrink"]})
         log.info("RadarWeightNet: held-out gain %+.3f [%+.3f, %+.3f] over %d rows in %d folds; best shrink %g "
                  "[%+.3f, %+.3f]; kept at s = %g (weights 1 + s (w - 1); 0 unless the best's CI clears 0)",
-                 g["gain"], *g["gain_ci95"], g["rows"], g["folds"], g.get("shrink_best_ssim", g["shrink"]),
-                 *g.get("gain_chosen_ci95", g["gain_ci95"]), g["shrink"])
+                 g["gain"], *g["gain_ci95"], g["rows"], g["folds"], g["shrink_best_ssim"],
+                 *g["gain_chosen_ci95"], g["shrink"])
 
     def fitted_sim(self, split: Split) -> dict | None:
         """The ``sim`` settings fitted on the real training rows (``synth.fit_sim``; None: ``sim`` as
