@@ -17,9 +17,8 @@ Public API:
     PairsDataModule(train: Pairs, phases, seed)                          the training batches
     SynthFitModule(sim, net, phases)                                     the LightningModule
     fit_weight_net(sim, train: Pairs, *, phases, seed, ...) -> RadarWeightNet   the one training loop
-    guarded_weight_net(sim, train: Pairs, labels, *, folds, probe, ...) -> (Shrunk, report)   fitted with held-out rows
-    choose_shrink(model, held, probe) -> (shrink, report)                  its rule: held-out SSIM, then the probe
-    ProbePool(caches, rows, labels, of_train);  probe_correct(train_x, train_y, test_x, test_y) -> (M,) bool
+    guarded_weight_net(sim, train: Pairs, labels, *, folds, ...) -> (Shrunk, report)   fitted with held-out rows
+    choose_shrink(model, held) -> (shrink, report)                         its rule, from per-row held-out SSIM
     Shrunk(net, shrink)                                                    weights 1 + shrink (w - 1)
     predict(sim, net | None, pairs, batch_size=32) -> (N, 64, 32)         None: modelling only
     predict_cached(sim, net | None, caches, rows, batch_size=32) -> (N, 64, 32)   streamed from the caches
@@ -264,118 +263,50 @@ class Shrunk(torch.nn.Module):
 
 
 SHRINKS = (0.0, 0.25, 0.5, 0.75, 1.0)
-# In the synthetic files' cache key: a new rule never reuses old files.
-GUARD_RULE = "best shrink if its CI clears 0 and the linear probe does not lose"
+GUARD_RULE = "best shrink if its CI clears 0"  # in the synthetic files' cache key: a new rule never reuses old files
 
 
-def probe_correct(train_x: torch.Tensor, train_y: np.ndarray, test_x: torch.Tensor, test_y: np.ndarray, *,
-                  l2: float = 1e-2, max_iter: int = 100) -> np.ndarray:
-    """Which ``test_x`` spectrograms (M, 64, 32) a linear probe trained on ``train_x`` (N, 64, 32) labels
-    right: multinomial logistic regression on the standardised pixels, L2 ``l2`` on the weights, full-batch
-    L-BFGS from zero (deterministic). A cheap stand-in for "what a classifier trained on these synthetic
-    rows would make of real ones": seconds, where the job's classifier takes minutes."""
-    x = train_x.reshape(len(train_x), -1).double()
-    mu, sd = x.mean(0), x.std(0) + 1e-6
-    x, t = (x - mu) / sd, (test_x.reshape(len(test_x), -1).double() - mu) / sd
-    y = torch.as_tensor(np.asarray(train_y), dtype=torch.long)
-    n_classes = int(max(y.max().item(), int(np.max(test_y))) + 1)
-    w = torch.zeros(x.shape[1], n_classes, dtype=torch.float64, requires_grad=True)
-    b = torch.zeros(n_classes, dtype=torch.float64, requires_grad=True)
-    opt = torch.optim.LBFGS([w, b], max_iter=max_iter, line_search_fn="strong_wolfe")
-
-    def closure() -> torch.Tensor:
-        opt.zero_grad()
-        loss = torch.nn.functional.cross_entropy(x @ w + b, y) + l2 * (w ** 2).sum()
-        loss.backward()
-        return loss
-
-    with torch.enable_grad():
-        opt.step(closure)
-    with torch.no_grad():
-        return ((t @ w + b).argmax(1).numpy() == np.asarray(test_y))
-
-
-@dataclass
-class ProbePool:
-    """The skeletons whose synthetic rows a job trains on, for the guard's downstream check: cache
-    ``rows`` with their gesture ``labels``, and for each training row the index of its own skeleton in
-    ``rows`` (-1: not among them), so a held-out row's own synthetic twin never trains its probe."""
-
-    caches: DatasetCaches
-    rows: np.ndarray
-    labels: np.ndarray
-    of_train: np.ndarray
-
-
-def choose_shrink(model: np.ndarray, held: dict[float, np.ndarray], probe: tuple[np.ndarray, np.ndarray] | None = None,
-                  *, n_boot: int = 1000, seed: int = 0) -> tuple[float, dict]:
+def choose_shrink(model: np.ndarray, held: dict[float, np.ndarray], *, n_boot: int = 1000,
+                  seed: int = 0) -> tuple[float, dict]:
     """The shrink a guarded RadarWeightNet applies, from per-row held-out SSIM: ``model`` of the
     modelling-only simulator, ``held[s]`` of the network shrunk by s. The shrink with the highest mean
     is kept only when its held-out gain (gap_closed against ``model``, 95 % paired-bootstrap CI) has a
-    CI above 0, and, given ``probe`` (per held-out row, whether the linear probe trained on the model's
-    and on the chosen network's synthetic rows labels it right), only when the network's probe gets at
-    least as many rows right. Otherwise 0, the modelling-only simulator: a gain the rows cannot tell
-    from noise is not worth the network's risk, and a closer spectrogram that separates the gestures
-    worse is no gain (docs/configuration.md#training-jobs)."""
+    CI above 0; otherwise 0, the modelling-only simulator: a gain the rows cannot tell from noise is not
+    worth the network's risk (docs/configuration.md#training-jobs)."""
     means = {lam: float(v.mean()) for lam, v in held.items()}
     best = max(held, key=lambda lam: (means[lam], -lam))  # ties: the smaller shrink
     gain = bootstrap_gap_closed(model, held[max(held)], n_boot=n_boot, seed=seed)
     chosen = bootstrap_gap_closed(model, held[best], n_boot=n_boot, seed=seed)
     shrink = best if best > 0 and chosen.ci95[0] > 0 else 0.0
-    report = {"heldout_ssim": {str(lam): m for lam, m in means.items()}, "shrink_best_ssim": best,
-              "gain": gain.estimate, "gain_ci95": list(gain.ci95), "gain_chosen": chosen.estimate,
-              "gain_chosen_ci95": list(chosen.ci95)}
-    if probe is not None:
-        report["probe_acc_model"], report["probe_acc_network"] = (float(np.mean(c)) for c in probe)
-        if int(np.sum(probe[1])) < int(np.sum(probe[0])):
-            shrink = 0.0
-    return shrink, {**report, "shrink": shrink}
-
-
-def _probe_fold(sim: Simulator, net: torch.nn.Module, pool: ProbePool, model_x: torch.Tensor, held_out: Pairs,
-                test: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """One fold of the downstream check: the probe trained on the model's and on ``net``'s synthetic rows
-    of the pool (less the held-out rows' own skeletons), scored on the held-out measured rows."""
-    keep = np.setdiff1d(np.arange(len(pool.rows)), pool.of_train[test])
-    net_x = predict_cached(sim, net, pool.caches, pool.rows[keep])
-    return tuple(probe_correct(x, pool.labels[keep], held_out.targets, labels[test]) for x in (model_x[keep], net_x))
+    return shrink, {"heldout_ssim": {str(lam): m for lam, m in means.items()}, "shrink": shrink,
+                    "shrink_best_ssim": best, "gain": gain.estimate, "gain_ci95": list(gain.ci95),
+                    "gain_chosen": chosen.estimate, "gain_chosen_ci95": list(chosen.ci95)}
 
 
 def guarded_weight_net(sim: Simulator, train: Pairs, labels: np.ndarray, *, folds: int = 2,
                        shrinks: Sequence[float] = SHRINKS, phases: Sequence[Phase] = PAPER_SCHEDULE, seed: int = 0,
-                       net_kwargs: dict | None = None, n_boot: int = 1000,
-                       probe: ProbePool | None = None) -> tuple[Shrunk, dict]:
+                       net_kwargs: dict | None = None, n_boot: int = 1000) -> tuple[Shrunk, dict]:
     """RadarWeightNet that knows when it does not help: ``folds`` networks, each trained on the other
     folds of ``train`` (stratified by ``labels``), score every shrink toward weight 1 on their held-out
-    rows; :func:`choose_shrink` picks the shrink (the best held-out SSIM, when its gain's CI clears 0
-    and, given a ``probe`` pool, the linear probe on the fold networks' synthetic rows labels as many
-    held-out rows right as on the model's), which is applied to one more network trained on all rows.
-    Shrink 0 is the modelling-only simulator, and then no final network is trained.
+    rows; :func:`choose_shrink` picks the shrink (the best held-out SSIM, when its gain's CI clears 0),
+    which is applied to one more network trained on all rows. Shrink 0 is the modelling-only simulator,
+    and then no final network is trained.
 
     The report: :func:`choose_shrink`'s (per shrink the held-out mean SSIM; the applied ``shrink`` and the
     best by SSIM; ``gain``: the held-out gap_closed [95 % CI] of the unshrunk network, 1 - SSIM of the
     modelling-only simulator being the gap; ``gain_chosen`` of the best shrink, optimistic: chosen on those
-    rows; the probe's held-out accuracies when it ran), with ``folds`` and ``rows``."""
+    rows), with ``folds`` and ``rows``."""
     labels = np.asarray(labels)
     parts = stratified_partition(labels, [1.0 / folds] * folds, seed, every_part=True)
     held = {lam: np.zeros(len(train)) for lam in shrinks}
-    nets = []
     for j, test in enumerate(parts):
-        nets.append(fit_weight_net(sim, train.subset(np.setdiff1d(np.arange(len(train)), test)), phases=phases,
-                                   seed=seed + j + 1, net_kwargs=net_kwargs))
+        net = fit_weight_net(sim, train.subset(np.setdiff1d(np.arange(len(train)), test)), phases=phases,
+                             seed=seed + j + 1, net_kwargs=net_kwargs)
         held_out = train.subset(test)
         for lam in shrinks:
-            held[lam][test] = per_example_ssim(held_out.targets, predict(sim, Shrunk(nets[j], lam), held_out))
+            held[lam][test] = per_example_ssim(held_out.targets, predict(sim, Shrunk(net, lam), held_out))
     model = held[0.0] if 0.0 in held else per_example_ssim(train.targets, predict(sim, None, train))
     shrink, choice = choose_shrink(model, held, n_boot=n_boot, seed=seed)
-    if shrink > 0 and probe is not None:  # the downstream check runs only for a network the SSIM rule keeps
-        model_x = predict_cached(sim, None, probe.caches, probe.rows)
-        correct = (np.zeros(len(train), bool), np.zeros(len(train), bool))
-        for j, test in enumerate(parts):
-            fold = _probe_fold(sim, Shrunk(nets[j], shrink), probe, model_x, train.subset(test), test, labels)
-            for c, f in zip(correct, fold):
-                c[test] = f
-        shrink, choice = choose_shrink(model, held, correct, n_boot=n_boot, seed=seed)
     report = {"folds": folds, "rows": len(train), **choice}
     net = fit_weight_net(sim, train, phases=phases, seed=seed, net_kwargs=net_kwargs) if shrink > 0 else \
         RadarWeightNet(**(net_kwargs or {})).eval()

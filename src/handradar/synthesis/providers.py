@@ -68,7 +68,6 @@ from handradar.sim.simulator import Simulator
 from handradar.synthesis.fit import (
     GUARD_RULE,
     Phase,
-    ProbePool,
     fit_weight_net,
     guarded_weight_net,
     load_pairs,
@@ -189,12 +188,9 @@ def synthesize_rows(real_path: str | Path, rows: np.ndarray, mode: Literal["mode
         train = load_pairs(caches, targets, np.asarray([local[int(r)] for r in fit_rows]))
         if guard_folds >= 2:
             with h5py.File(real_path, "r") as h5:
-                all_labels = h5["labels"][()]
-            position = {int(r): i for i, r in enumerate(rows)}
-            probe = ProbePool(caches, np.asarray([local[int(r)] for r in rows]), all_labels[rows],
-                              np.asarray([position.get(int(r), -1) for r in fit_rows]))
-            net, report = guarded_weight_net(simulator, train, all_labels[fit_rows], folds=guard_folds, phases=phases,
-                                             seed=seed, net_kwargs=net_kwargs, probe=probe)
+                labels = h5["labels"][()][fit_rows]
+            net, report = guarded_weight_net(simulator, train, labels, folds=guard_folds, phases=phases, seed=seed,
+                                             net_kwargs=net_kwargs)
             extra = {"rwn_guard": json.dumps(report)}  # train.py logs it (Job.log_rwn_guard)
         else:
             net = fit_weight_net(simulator, train, phases=phases, seed=seed, net_kwargs=net_kwargs)

@@ -402,15 +402,10 @@ class Job:
         tag = "" if draw == 0 else f"_draw{draw}"
         self.tracker.log_metrics({f"synth/rwn_heldout_gain{tag}": g["gain"], f"synth/rwn_heldout_gain_ci_low{tag}":
                                   g["gain_ci95"][0], f"synth/rwn_shrink{tag}": g["shrink"]})
-        if "probe_acc_model" in g:
-            self.tracker.log_metrics({f"synth/rwn_probe_acc_model{tag}": g["probe_acc_model"],
-                                      f"synth/rwn_probe_acc_network{tag}": g["probe_acc_network"]})
-        probe = ("; linear probe on held-out rows %.3f (model) vs %.3f (network)"
-                 % (g["probe_acc_model"], g["probe_acc_network"]) if "probe_acc_model" in g else "")
         log.info("RadarWeightNet: held-out gain %+.3f [%+.3f, %+.3f] over %d rows in %d folds; best shrink %g "
-                 "[%+.3f, %+.3f]%s; kept at s = %g (weights 1 + s (w - 1); 0 unless the best's CI clears 0 and "
-                 "the probe does not lose)", g["gain"], *g["gain_ci95"], g["rows"], g["folds"], g["shrink_best_ssim"],
-                 *g["gain_chosen_ci95"], probe, g["shrink"])
+                 "[%+.3f, %+.3f]; kept at s = %g (weights 1 + s (w - 1); 0 unless the best's CI clears 0)",
+                 g["gain"], *g["gain_ci95"], g["rows"], g["folds"], g["shrink_best_ssim"],
+                 *g["gain_chosen_ci95"], g["shrink"])
 
     def fitted_sim(self, split: Split) -> dict | None:
         """The ``sim`` settings fitted on the real training rows (``synth.fit_sim``; None: ``sim`` as
