@@ -2,8 +2,8 @@
 (``python -m benchmarks.rwn_guard_decision +experiment=data_efficiency split.per_class=8 seed=1 ...``).
 
 Takes a finished job's train.py overrides (the same ones, so that its job hash and hence its state
-folder, with the fitted simulator, are found) and runs only the synthesis of its RadarWeightNet
-variant: the fold fits, the guard's rule and the final fit. Prints the guard's report (JSON) and
+folder, with its split and fitted simulator, are found; a job never run is split and fitted here) and
+runs only the synthesis of its RadarWeightNet variant: the fold fits, the guard's rule and the final fit. Prints the guard's report (JSON) and
 the seconds it took. The synthetic file lands in ``synth.cache_dir`` as the job would write it, so a
 later ``train.py ... resume=false`` only trains the classifier. A way to judge a new guard rule over
 many jobs at the cost of their synthesis: where the rule keeps a job's shrink, its accuracy is the
@@ -22,26 +22,24 @@ import torch
 from hydra import compose, initialize_config_dir
 from hydra.utils import instantiate
 
-import handradar.config  # noqa: F401  (registers the ${hr_root:} resolver)
+from handradar.config import VERSION_BASE, config_dir
 from handradar.data.datasets import file_hash, load_arrays
 from handradar.data.hdf5 import read_attrs
 from handradar.tasks.train import Job, job_hash
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
-
 
 def main(overrides: list[str]) -> dict:
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+    with initialize_config_dir(config_dir=str(config_dir()), version_base=VERSION_BASE):
         cfg = compose("train", overrides=overrides)
     torch.set_num_threads(int(cfg.get("threads") or 1))
     t0 = time.time()
-    job = Job(cfg, Path(tempfile.mkdtemp()))
-    path = instantiate(cfg.data.dataset).path()
-    job.real = load_arrays(path)
-    job.state = Path(cfg.state_dir) / job_hash(cfg, file_hash(path))
-    if not (job.state / "fitted_sim.yaml").is_file() and str(cfg.synth.get("fit_sim", "none")) != "none":
-        raise SystemExit(f"{job.state}: no finished job with these overrides (its fitted simulator is missing)")
-    parts = job._make_extra("enhanced", job.split())
+    with tempfile.TemporaryDirectory() as run_dir:  # the job writes nothing there before it trains
+        job = Job(cfg, Path(run_dir))
+        path = instantiate(cfg.data.dataset).path()
+        job.real = load_arrays(path)
+        job.state = Path(cfg.state_dir) / job_hash(cfg, file_hash(path))
+        job.state.mkdir(parents=True, exist_ok=True)
+        parts = job._make_extra("enhanced", job.split())
     report = json.loads(read_attrs(parts[0].path).get("rwn_guard", "{}"))
     return {"overrides": overrides, "seconds": round(time.time() - t0), **report}
 

@@ -57,6 +57,27 @@ def test_few_shot_job_end_to_end(fake_data: Path, tmp_path: Path, caplog: pytest
     assert (state / "radar_only" / "result.json").is_file()
 
 
+def test_rwn_guard_decision_reruns_only_the_jobs_radarweightnet_synthesis(fake_data: Path, tmp_path: Path):
+    """benchmarks/rwn_guard_decision.py: given a finished job's overrides, the provider is asked once more for
+    that job's RadarWeightNet rows, on the job's own split, and no classifier is trained."""
+    from benchmarks.rwn_guard_decision import main
+
+    overrides = ["+experiment=few_shot_20pct", "variants=[enhanced_synth]", "trainer.fast_dev_run=true", "seed=3",
+                 *fake_overrides(fake_data, tmp_path)]
+    fakes.CALLS.clear()
+    run(compose_train(overrides), run_dir=tmp_path / "run")
+    (job_call,) = fakes.CALLS
+    fakes.CALLS.clear()
+    state = _state(tmp_path / "run", tmp_path, "few_shot_20pct")
+    before = sorted(p.relative_to(state) for p in state.rglob("*"))
+    out = main(overrides)
+    (call,) = fakes.CALLS
+    assert call["mode"] == "enhanced" and call["seed"] == 3 and out["overrides"] == overrides
+    assert np.array_equal(call["rows"], job_call["rows"]) and np.array_equal(call["fit_rows"], job_call["fit_rows"])
+    assert _state(tmp_path / "run", tmp_path, "few_shot_20pct") == state  # the job's own state folder, no other
+    assert sorted(p.relative_to(state) for p in state.rglob("*")) == before  # and nothing trained in it
+
+
 def test_fixed_protocol_synthesises_every_non_test_skeleton(fake_data: Path, tmp_path: Path):
     fakes.CALLS.clear()
     cfg = compose_train(["+experiment=few_shot_20pct", "split.test_fraction=0.25",  # fixed: the default
