@@ -3,8 +3,8 @@
 
 Takes a finished job's train.py overrides (the same ones, so that its job hash and hence its state
 folder, with its split and fitted simulator, are found; a job never run is split and fitted here) and
-runs only the synthesis of its RadarWeightNet variant: the fold fits, the guard's rule and the final fit. Prints the guard's report (JSON) and
-the seconds it took. The synthetic file lands in ``synth.cache_dir`` as the job would write it, so a
+runs only the synthesis of its RadarWeightNet variant: the fold fits, the guard's rule and the final
+fit. Prints the guard's report (JSON) and the seconds it took. The synthetic file lands in ``synth.cache_dir`` as the job would write it, so a
 later ``train.py ... resume=false`` only trains the classifier. A way to judge a new guard rule over
 many jobs at the cost of their synthesis: where the rule keeps a job's shrink, its accuracy is the
 old run's (CPU runs are deterministic); where it falls back to 0, model-based's.
@@ -20,12 +20,10 @@ from pathlib import Path
 
 import torch
 from hydra import compose, initialize_config_dir
-from hydra.utils import instantiate
 
 from handradar.config import VERSION_BASE, config_dir
-from handradar.data.datasets import file_hash, load_arrays
 from handradar.data.hdf5 import read_attrs
-from handradar.tasks.train import Job, job_hash
+from handradar.tasks.train import Job
 
 
 def main(overrides: list[str]) -> dict:
@@ -35,9 +33,7 @@ def main(overrides: list[str]) -> dict:
     t0 = time.time()
     with tempfile.TemporaryDirectory() as run_dir:  # the job writes nothing there before it trains
         job = Job(cfg, Path(run_dir))
-        path = instantiate(cfg.data.dataset).path()
-        job.real = load_arrays(path)
-        job.state = Path(cfg.state_dir) / job_hash(cfg, file_hash(path))
+        job.load_data()
         job.state.mkdir(parents=True, exist_ok=True)
         parts = job._make_extra("enhanced", job.split())
     report = json.loads(read_attrs(parts[0].path).get("rwn_guard", "{}"))

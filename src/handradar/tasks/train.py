@@ -190,11 +190,7 @@ class Job:
         logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)
         self.stages = Stages(self.stage_names())
         with self.stages("data"):
-            real_path = instantiate(cfg.data.dataset).path()
-            self.real = load_arrays(real_path)
-        data_hash = file_hash(real_path)
-        jhash = job_hash(cfg, data_hash)
-        self.state = Path(cfg.state_dir) / jhash
+            real_path, data_hash, jhash = self.load_data()
         with self._state_lock():
             if not cfg.resume and self.rank_zero:
                 shutil.rmtree(self.state, ignore_errors=True)
@@ -228,6 +224,16 @@ class Job:
                 if self.rank_zero:
                     self._write_outputs(results, metrics)
         return metrics
+
+    def load_data(self) -> tuple[Path, str, str]:
+        """Load the real dataset into ``real`` and locate the job's ``state`` folder (created by ``run``):
+        (dataset path, data hash, job hash)."""
+        real_path = instantiate(self.cfg.data.dataset).path()
+        self.real = load_arrays(real_path)
+        data_hash = file_hash(real_path)
+        jhash = job_hash(self.cfg, data_hash)
+        self.state = Path(self.cfg.state_dir) / jhash
+        return real_path, data_hash, jhash
 
     def stage_names(self) -> list[str]:
         """The job's stages in order: the data, then (variants) what the variants add and each variant."""
