@@ -19,6 +19,10 @@ benchmark resumes.
 Scoring is the only place that knows the truth, and it takes it from the world configuration this
 module generated (the case), never from the data the diagnosis sees.
 
+``benchmark.folders`` (a manifest, :class:`FolderCases`) judges folders of recordings instead of worlds:
+held-back folders from other sources, each with its known answer. They are ingested and diagnosed as
+``diagnose.py data.root=DIR`` does, the truth comes from the manifest, and there is no truth side.
+
 Outputs, all in the run folder (never into docs/): ``figures/gap_confusion.png`` (withheld effect x
 attributed cause), ``gap_benchmark.md`` (the top-1 attribution and gap_closed per case),
 ``benchmark.json`` (every figure) and ``record.json``, the compact record
@@ -38,6 +42,8 @@ Public API:
     BenchmarkWorlds.from_config(cfg)     (a preset's worlds: .config(case), .dataset(case, window_starts_s=None),
                                           .clean(window_starts_s=None), .radar, .chain)
     truth_side(worlds, case_path, clean_path, ...) -> dict   (both, over the case's windows)
+    truth_of(text, where) -> str;  FolderCases.load(manifest)   (benchmark.folders: folders of recordings
+                                                       whose answer is known, judged like the world's cases)
     score(results) -> dict                            (confusion matrix, top-1, mean gap_closed)
     run_benchmark(cfg, out_dir) -> Path               (the run's record.json)
 """
@@ -62,10 +68,11 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_write_text
-from handradar.errors import HandradarError
+from handradar.errors import FormatError, HandradarError
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
-from handradar.gap.job import headline_metrics, write_outputs
+from handradar.data.datasets import RecordingsFolder
+from handradar.gap.job import check_convention, headline_metrics, write_outputs
 from handradar.gap.records import benchmark_record, found, record_name, withheld, wrong_cause
 from handradar.gap.report import VERDICTS
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
@@ -205,6 +212,70 @@ class BenchmarkWorlds:
             node = node.setdefault(key, {})
         node[last] = value
         return dataclasses.replace(self, world=w)
+
+
+def truth_of(text: str, where: str) -> str:
+    """A folder's answer as the manifest states it: "none", an effect name, or distinct effects joined
+    by "+"; anything else is a FormatError naming ``where``."""
+    parts = str(text).split("+")
+    if text == "none" or (all(p in EFFECTS for p in parts) and len(set(parts)) == len(parts)):
+        return str(text)
+    raise FormatError(where, f"truth {text!r}: expected none, one of {', '.join(EFFECTS)}, "
+                             "or distinct effects joined by '+'")
+
+
+@dataclass(frozen=True)
+class FolderCases:
+    """Folders of recordings whose withheld effects are known (``benchmark.folders``: a manifest), judged
+    like the world's cases: the recordings ingested as ``diagnose.py data.root=DIR`` ingests them, no
+    truth side (there is no effect-free twin of a folder).
+
+    The manifest (YAML)::
+
+        also_present: [tracking_jitter]   # effects every folder carries: naming them is never wrong
+        folders:
+          occlusion_1: {root: occ1, truth: occlusion}    # root relative to the manifest's folder
+          control: {root: /data/ctrl, truth: none}       # truth: an effect, several joined by "+", or none
+    """
+
+    manifest: Path
+    roots: dict[str, Path]
+    truths: dict[str, str]
+    present: list[str]
+
+    @classmethod
+    def load(cls, manifest: str | Path) -> FolderCases:
+        path = Path(manifest).expanduser().resolve()
+        if not path.is_file():
+            raise FormatError(path, "manifest not found (benchmark.folders: a YAML file listing the folders)")
+        try:
+            doc = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+        except Exception as exc:  # omegaconf wraps YAML errors in several types
+            raise FormatError(path, f"not readable as YAML ({type(exc).__name__}: {exc})") from None
+        folders = doc.get("folders") if isinstance(doc, dict) else None
+        if not isinstance(folders, dict) or not folders:
+            raise FormatError(path, "expected a mapping 'folders: {name: {root: DIR, truth: EFFECT}}'")
+        roots, truths = {}, {}
+        for name, entry in folders.items():
+            if not isinstance(entry, dict) or not {"root", "truth"} <= set(entry):
+                raise FormatError(path, f"folder {name!r}: expected {{root: DIR, truth: EFFECT}}, found {entry!r}")
+            root = (path.parent / str(entry["root"])).expanduser()
+            if not root.is_dir():
+                raise FormatError(path, f"folder {name!r}: {root} is not a folder")
+            roots[str(name)], truths[str(name)] = root, truth_of(entry["truth"], f"{path} ({name})")
+        present = list(doc.get("also_present") or [])
+        unknown = [e for e in present if e not in EFFECTS]
+        if unknown:
+            raise FormatError(path, f"also_present: {', '.join(map(str, unknown))} not in {', '.join(EFFECTS)}")
+        return cls(path, roots, truths, present)
+
+    @property
+    def label(self) -> str:
+        """The record's world: ``folders-<the manifest's folder name>``."""
+        return f"folders-{self.manifest.parent.name}"
+
+    def cases(self) -> list[Case]:
+        return [Case(name, (), truth) for name, truth in self.truths.items()]
 
 
 def score(results: Sequence[Mapping]) -> dict:
@@ -401,10 +472,14 @@ def _attributed(r: Mapping) -> str:
 
 def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, settings: Mapping) -> str:
     sgn = functools.partial(fmt_number, signed=True)  # gap_closed figures carry their sign
+    rows_are = (f"Each row is a folder of recordings listed in {settings['manifest']} with its known answer (truth), "
+                "diagnosed by the paper's simulator; a control's right answer is `none`; effects every folder carries "
+                "(also present) are never a wrong cause. " if settings.get("manifest") else
+                "Each row is a reference world with one effect on (the other vocabulary effects off), diagnosed by the "
+                "paper's simulator without that effect; `nothing` and `iq_imbalance` are controls whose right answer "
+                "is `none` (no vocabulary effect / an effect outside the vocabulary). ")
     lines = ["# Gap diagnosis benchmark: withheld effects", "",
-             "Each row is a reference world with one effect on (the other vocabulary effects off), diagnosed by the "
-             "paper's simulator without that effect; `nothing` and `iq_imbalance` are controls whose right answer "
-             "is `none` (no vocabulary effect / an effect outside the vocabulary). Found: the true effect named, or "
+             rows_are + "Found: the true effect named, or "
              "leading an `inconclusive` verdict (with the recordings estimated to decide it); palm also by `none` or "
              "`inconclusive` with no other effect named (docs/gap_validation.md). "
              f"Generated by `{settings.get('command') or DEFAULT_COMMAND}`.", "",
@@ -458,16 +533,18 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     compact record into ``out_dir`` (and the record into ``benchmark.record_dir`` when set)."""
     bench = cfg.benchmark
     out = Path(out_dir)
-    worlds = BenchmarkWorlds.from_config(cfg)
-    radar, chain = worlds.radar, worlds.chain
+    folders = FolderCases.load(bench.folders) if bench.get("folders") else None
+    worlds = None if folders else BenchmarkWorlds.from_config(cfg)
+    radar, chain = (instantiate(cfg.radar), instantiate(cfg.chain)) if folders else (worlds.radar, worlds.chain)
     diag_cfg = OmegaConf.to_container(cfg.diagnose, resolve=True)
     sim_cfg = OmegaConf.to_container(cfg.sim, resolve=True)
     state = Path(bench.state_dir)
     results: list[dict] = []
     t_start = time.perf_counter()
     seed = diag_cfg.get("seed", 0)
-    world_name = group_choice("world") or "custom"  # the world group's choice (outside Hydra: not known)
-    size = bench.get("size")
+    # the world group's choice (outside Hydra: not known); folders: their own label and their rows
+    world_name = folders.label if folders else group_choice("world") or "custom"
+    size = None if folders else bench.get("size")
     label = f"{world_name}_{size}" if size is not None else world_name
     tags = {"preset": cfg.task_name, "world": world_name, "size": size, "seed": seed, "code_version": code_version(),
             "run_dir": out}
@@ -475,9 +552,12 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
     with tracked_run(tracker, run_name=f"{cfg.task_name}-{label}-seed{seed}", tags=tags,
                      config=OmegaConf.to_container(cfg, resolve=True)):
         clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
-        present = always_present(worlds.world)
-        for case in cases(list(bench.cases)):
-            key = config_hash("gap-benchmark-case", worlds.config(case), diag_cfg, sim_cfg, radar, chain,
+        present = folders.present if folders else always_present(worlds.world)
+        for case in folders.cases() if folders else cases(list(bench.cases)):
+            recordings = folders and RecordingsFolder(folders.roots[case.name], chain, Path(cfg.paths.cache_dir) / "datasets",
+                                                      skeleton_rate_hz=float(cfg.skeleton_rate_hz))
+            source = recordings.cache_key() if recordings else worlds.config(case)  # a folder: its files' listing
+            key = config_hash("gap-benchmark-case", source, diag_cfg, sim_cfg, radar, chain,
                               package_digest())  # the package's source: a docs-only commit keeps finished cases
             done = state / f"{case.name}-{key}.json"
             if done.is_file():
@@ -485,18 +565,21 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                 log.info("case %s: resumed from %s", case.name, done)
                 continue
             t0 = time.perf_counter()
-            path = worlds.dataset(case)
-            clean = clean or worlds.clean()
+            path = recordings.path() if recordings else worlds.dataset(case)
             data = load_dataset(path)
+            if recordings:
+                check_convention(data)  # another source's folder may be Doppler-mirrored: the log says so
             factory = SimFactory.from_config(cfg.sim, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
             diagnosis = diagnose(data, factory, factory.effects,
                                  diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
                                  progress=bool(cfg.get("progress", True)))
             write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))
-            res = {**_case_result(case, diagnosis.report, time.perf_counter() - t0, len(data)),
-                   **truth_side(worlds, path, clean, baseline=diagnosis.baseline, rows=diagnosis.evaluation,
-                                candidate=diagnosis.candidates.get(case.truth),
-                                n_boot=int(diag_cfg.get("n_boot", 2000)), seed=seed)}
+            res = _case_result(case, diagnosis.report, time.perf_counter() - t0, len(data))
+            if worlds:
+                clean = clean or worlds.clean()
+                res.update(truth_side(worlds, path, clean, baseline=diagnosis.baseline, rows=diagnosis.evaluation,
+                                      candidate=diagnosis.candidates.get(case.truth),
+                                      n_boot=int(diag_cfg.get("n_boot", 2000)), seed=seed))
             res["seconds"], res["also_present"] = time.perf_counter() - t0, present
             atomic_write_text(done, json.dumps(res, indent=1) + "\n")
             results.append(res)
@@ -511,12 +594,14 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         settings = {"rows": n_rows, "split": split_text(diag_cfg, results[0]["folds"] if results else 1),
                     "fit_rows": diag_cfg.get("fit_rows") or "all", "seed": diag_cfg.get("seed", 0),
                     "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
-                    "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS)}
+                    "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS),
+                    **({"manifest": str(folders.manifest)} if folders else {})}
         md_path = out / "gap_benchmark.md"
         atomic_write_text(md_path, results_markdown(results, scores, FIGURE, settings) + "\n")
         atomic_write_text(out / "benchmark.json", json.dumps({"results": results, "scores": scores,
                                                               "settings": settings}, indent=1) + "\n")
-        record = benchmark_record(results, scores, settings, world=world_name, size=size, world_version=WORLD_VERSION,
+        record = benchmark_record(results, scores, settings, world=world_name, size=size,
+                                  world_version="recordings" if folders else WORLD_VERSION,
                                   machine=machine(), command=settings["command"] or DEFAULT_COMMAND)
         rec_path = out / "record.json"
         for path in (rec_path, *([Path(bench.record_dir) / record_name(record)] if bench.get("record_dir") else [])):
