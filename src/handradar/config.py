@@ -7,6 +7,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from handradar.errors import FormatError
 from handradar.provenance import REPO_ROOT
 
 VERSION_BASE = "1.3"
@@ -28,6 +29,18 @@ def experiments_dir() -> Path:
 def first_dir(*candidates: str) -> str:
     """The first candidate that is an existing folder, else the first (so errors name where to put it)."""
     return next((c for c in candidates if Path(c).is_dir()), candidates[0])
+
+
+def read_yaml(path: str | Path) -> object:
+    """A YAML file's content as plain containers, interpolations resolved; a syntax error is one FormatError
+    line naming the file, the line and the parser's problem."""
+    try:
+        return OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+    except Exception as exc:  # yaml's MarkedYAMLError, or omegaconf's wrappers of it
+        mark = getattr(exc, "problem_mark", None)
+        problem = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        raise FormatError(path, f"not readable as YAML: {problem}",
+                          line=None if mark is None else mark.line + 1) from None
 
 
 def register_resolvers() -> None:

@@ -358,3 +358,73 @@ def test_several_effects_withheld_at_once_are_one_case_judged_by_what_is_kept():
     assert all(re.fullmatch(r"[A-Za-z0-9_\-. :/]+", n) for n in names)
     assert s["several"] == [{"case": case.name, "after_effects": ["forearm"], "kept_precision": 1.0,
                              "kept_recall": pytest.approx(1 / 3), "after_gap_closed": 0.2, "reference_gap_closed": 0.3}]
+
+
+def _folder_manifest(tmp_path, text: str):
+    path = tmp_path / "held_back" / "folders.yaml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("folders: []\n", "expected a mapping 'folders"),
+    ("folders:\n  a: {root: a}\n", "folder 'a': expected {root: DIR, truth: EFFECT}"),
+    ("folders:\n  a: {root: missing, truth: palm}\n", "folder 'a': .*missing is not a folder"),
+    ("folders:\n  a: {root: ., truth: palm+palm}\n", "truth 'palm\\+palm'"),
+    ("folders:\n  a: {root: ., truth: glare}\n", "truth 'glare'"),
+    ("also_present: [glare]\nfolders:\n  a: {root: ., truth: none}\n", "also_present: glare not in"),
+    ("folders: {a: [\n", "not readable as YAML: expected the node content"),
+])
+def test_a_bad_folder_manifest_is_one_line_naming_the_manifest_and_the_problem(tmp_path, text, problem):
+    from handradar.errors import FormatError
+    from handradar.gap.benchmark import FolderCases
+
+    path = _folder_manifest(tmp_path, text)
+    with pytest.raises(FormatError, match=problem) as err:
+        FolderCases.load(path)
+    assert str(err.value).startswith(str(path)) and "\n" not in str(err.value)
+    with pytest.raises(FormatError, match="manifest not found"):
+        FolderCases.load(tmp_path / "nowhere.yaml")
+
+
+def test_folders_with_known_answers_are_ingested_diagnosed_judged_and_resumed(tmp_path, radar, short_chain):
+    """benchmark.folders: two folders of the same 8 recordings of the independent writer, whose one point
+    reflector at the hand centre is what the palm effect adds (tests/gap/test_cli.py): listed with truth palm
+    the answer is found; listed with truth noise, palm is a wrong cause, unless the manifest says every
+    folder carries palm. A second run resumes every case: nothing is ingested or diagnosed again."""
+    from tests.data.writer import Scene, write_recording
+
+    for folder in ("a", "b"):
+        for i in range(8):
+            write_recording(tmp_path / "held_back" / folder / f"rec{i}",
+                            Scene(gesture=("grasp", "circle")[i % 2], subject=f"s{i % 3}",
+                                  velocity_m_s=-0.08 - 0.02 * i, repetition=i))
+    manifest = _folder_manifest(tmp_path, "folders:\n  palm_case: {root: a, truth: palm}\n"
+                                          f"  noise_case: {{root: {tmp_path / 'held_back' / 'b'}, truth: noise}}\n")
+    cfg = OmegaConf.create({
+        "task_name": "gap_benchmark", "progress": False, "skeleton_rate_hz": 100.0,
+        "radar": {"_target_": "handradar.radar.config.RadarConfig.from_cfg_text", "text": radar.to_cfg(), "source": "test"},
+        "chain": {"_target_": "handradar.radar.chain.ChainConfig", "n_columns": short_chain.n_columns},
+        "paths": {"cache_dir": str(tmp_path / "cache")},
+        "sim": {"_target_": "handradar.sim.simulator.Simulator", "_partial_": True, "effects": [], "effect_params": {}},
+        "diagnose": {"candidates": ["palm"], "radarweightnet": False, "n_boot": 200, "greedy_max": 1, "folds": 1,
+                     "fit_rows": None, "rcs_exponents": [1.0]},
+        "benchmark": {"folders": str(manifest), "cases": ["never_built"], "state_dir": str(tmp_path / "state"),
+                      "record_dir": str(tmp_path / "results")}})
+    record = validate_record(json.loads(run_benchmark(cfg, tmp_path / "run").read_text()), "record")
+    by = {c["case"]: c for c in record["cases"]}
+    assert record["world"] == "folders-held_back" and record["world_version"] == "recordings" and record["size"] == 8
+    assert (tmp_path / "results" / "folders-held_back_8.json").is_file()
+    assert by["palm_case"]["cause"] == by["noise_case"]["cause"] == "palm"
+    assert record["scores"]["effects_found"] == 1 and record["scores"]["wrong_causes"] == 1
+    assert len(list((tmp_path / "cache" / "datasets").glob("recordings-*.h5"))) == 2  # each folder ingested
+    md = (tmp_path / "run" / "gap_benchmark.md").read_text()
+    assert f"listed in {manifest}" in md and "| noise_case | noise | palm | no |" in md
+    assert "signature_mean" not in by["palm_case"]  # no effect-free twin: no truth side
+    for h5 in (tmp_path / "cache" / "datasets").glob("recordings-*.h5"):
+        h5.unlink()
+    manifest.write_text("also_present: [palm]\n" + manifest.read_text())
+    again = json.loads(run_benchmark(cfg, tmp_path / "run2").read_text())
+    assert not (tmp_path / "run2" / "cases").exists() and not list((tmp_path / "cache" / "datasets").glob("*.h5"))
+    assert [c["cause"] for c in again["cases"]] == ["palm", "palm"] and again["scores"]["wrong_causes"] == 0

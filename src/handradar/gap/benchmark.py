@@ -71,6 +71,7 @@ from handradar.atomic import atomic_write_text
 from handradar.errors import FormatError, HandradarError
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
+from handradar.config import read_yaml
 from handradar.data.datasets import RecordingsFolder
 from handradar.gap.job import check_convention, headline_metrics, write_outputs
 from handradar.gap.records import benchmark_record, found, record_name, withheld, wrong_cause
@@ -248,10 +249,7 @@ class FolderCases:
         path = Path(manifest).expanduser().resolve()
         if not path.is_file():
             raise FormatError(path, "manifest not found (benchmark.folders: a YAML file listing the folders)")
-        try:
-            doc = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
-        except Exception as exc:  # omegaconf wraps YAML errors in several types
-            raise FormatError(path, f"not readable as YAML ({type(exc).__name__}: {exc})") from None
+        doc = read_yaml(path)
         folders = doc.get("folders") if isinstance(doc, dict) else None
         if not isinstance(folders, dict) or not folders:
             raise FormatError(path, "expected a mapping 'folders: {name: {root: DIR, truth: EFFECT}}'")

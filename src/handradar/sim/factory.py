@@ -20,6 +20,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from handradar.config import read_yaml
 from handradar.errors import FormatError
 from handradar.hand.model import HandModelConfig
 from handradar.radar.chain import ChainConfig
@@ -49,10 +50,7 @@ def _read_fitted(path: Path) -> dict[str, Any]:
     """The settings of a fitted_sim.yaml (checked: known settings, an effect list, parameter mappings)."""
     if not path.is_file():
         raise FormatError(path, "fitted simulator not found (sim.from_report: the fitted_sim.yaml a diagnose.py run wrote)")
-    try:
-        fitted = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
-    except Exception as exc:  # YAML syntax: the parser's own message says where
-        raise FormatError(path, f"not a readable YAML file ({exc})") from None
+    fitted = read_yaml(path)
     if not isinstance(fitted, dict) or not isinstance(fitted.get("effects", []), list):
         raise FormatError(path, "expected a mapping of simulator settings with an 'effects' list")
     fitted = without_removed(fitted)
