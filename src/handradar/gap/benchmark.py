@@ -72,6 +72,7 @@ from handradar.errors import FormatError, HandradarError
 from handradar.gap.data import load_dataset
 from handradar.gap.diagnosis import diagnose
 from handradar.config import read_yaml
+from handradar.data.convention import ConventionCheck
 from handradar.data.datasets import RecordingsFolder
 from handradar.gap.job import check_convention, headline_metrics, write_outputs
 from handradar.gap.records import benchmark_record, found, record_name, withheld, wrong_cause
@@ -274,6 +275,11 @@ class FolderCases:
 
     def cases(self) -> list[Case]:
         return [Case(name, (), truth) for name, truth in self.truths.items()]
+
+
+def convention_fix(check: ConventionCheck) -> str | None:
+    """The ingest option that puts a folder's rows in the simulator's sign convention (None: they are)."""
+    return "iq_swap" if check.iq_swapped() else "doppler_flip" if check.mirrored() else None
 
 
 def score(results: Sequence[Mapping]) -> dict:
@@ -493,6 +499,10 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
                f"(precision {fmt_number(s['kept_precision'])}, recall {fmt_number(s['kept_recall'])}) and closes "
                f"{sgn(s['after_gap_closed'])} of the gap; the world's own change on the simulator closes "
                f"{sgn(s.get('reference_gap_closed'))}.\n" for s in scores.get("several", [])],
+             *([f"**Against the simulator's sign convention** (re-ingest with the fix; the verdict is not the "
+                "simulator's): " + ", ".join(f"{r['case']} ({r['convention_fix']}=true)" for r in results
+                                             if r.get("convention_fix")) + ".\n"]
+               if any(r.get("convention_fix") for r in results) else []),
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "over the same window of each recording (mean / median): how visible the withheld effect is in the radar "
              "data at all. `world's change on the simulator` is the gap_closed [95 % CI] of the diagnosis's baseline "
@@ -565,15 +575,17 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             t0 = time.perf_counter()
             path = recordings.path() if recordings else worlds.dataset(case)
             data = load_dataset(path)
-            if recordings:
-                check_convention(data)  # another source's folder may be Doppler-mirrored: the log says so
+            # another source's folder may break the sign convention: its verdict would not be the simulator's
+            fix = recordings and convention_fix(check_convention(data))
             factory = SimFactory.from_config(cfg.sim, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
             diagnosis = diagnose(data, factory, factory.effects,
                                  diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
                                  progress=bool(cfg.get("progress", True)))
             write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))
             res = _case_result(case, diagnosis.report, time.perf_counter() - t0, len(data))
-            if worlds:
+            if recordings:
+                res["convention_fix"] = fix or None
+            else:
                 clean = clean or worlds.clean()
                 res.update(truth_side(worlds, path, clean, baseline=diagnosis.baseline, rows=diagnosis.evaluation,
                                       candidate=diagnosis.candidates.get(case.truth),

@@ -35,7 +35,7 @@ SCORE_KEYS = ("effects_correct", "effects_found", "wrong_causes", "effects_total
               "mean_after_gap_closed")
 CASE_KEYS = ("case", "truth", "cause", "correct", "recordings_needed", "true_gap_closed", "true_ci95",
              "true_rank", "top_candidate", "top_gap_closed", "after_effects", "after_gap_closed", "kept_precision",
-             "kept_recall", "reference_gap_closed", "also_present")
+             "kept_recall", "reference_gap_closed", "also_present", "convention_fix")
 # Effects no candidate scored row by row can earn (the world's palm return is an interference pattern that
 # 0.5 mm of geometry redraws): judged "must not mislead" (docs/gap_validation.md#how-a-case-is-judged)
 MUST_NOT_MISLEAD = frozenset({"palm"})
