@@ -432,3 +432,21 @@ def test_folders_with_known_answers_are_ingested_diagnosed_judged_and_resumed(tm
     again = json.loads(run_benchmark(cfg, tmp_path / "run2").read_text())
     assert not (tmp_path / "run2" / "cases").exists() and not list((tmp_path / "cache" / "datasets").glob("*.h5"))
     assert [c["cause"] for c in again["cases"][:2]] == ["palm", "palm"] and not wrong_cause(again["cases"][1])
+
+
+def test_case_folders_writes_the_benchmarks_case_worlds_and_a_manifest_the_folder_benchmark_reads(tmp_path):
+    """benchmarks/case_folders.py: each case's recordings are that case's world (its truth in meta.json:
+    the case's own effect on, every other vocabulary effect off) and the manifest names each folder's answer."""
+    from benchmarks.case_folders import main
+    from handradar.gap.benchmark import FolderCases
+
+    manifest = main(tmp_path / "cases", [
+        "benchmark.size=null", "benchmark.cases=[palm,nothing]", f"paths.cache_dir={tmp_path / 'cache'}",
+        "+benchmark.world={subjects: 1, repetitions: 1, gestures: [grasp], angles_deg: [0.0]}"])
+    folders = FolderCases.load(manifest)
+    assert folders.truths == {"palm": "palm", "nothing": "none"} and folders.present == []
+    for case, on in (("palm", {"palm"}), ("nothing", set())):
+        metas = [json.loads(p.read_text()) for p in (tmp_path / "cases" / case).glob("*/meta.json")]
+        assert len(metas) == 1 and metas[0]["gesture"] == "grasp"
+        effects = metas[0]["truth"]["effects"]
+        assert {n for n in EFFECT_NAMES if effects[n]["enabled"]} == on
