@@ -19,7 +19,8 @@ from handradar.runs.mlflow import flatten
 GOLDEN = json.loads((Path(__file__).parent / "gap_benchmark_golden.json").read_text())
 PATHS = ["paths.root_dir=/ROOT", "paths.log_dir=/LOG", "paths.cache_dir=/CACHE"]  # as when the golden was taken
 NAMES = {"task_name", "logger.experiment_name", "logger.artifact_location"}  # run names and where outputs go
-LAYERS = ("size", "sizes", "world", "record_dir")  # the new preset's own keys: their effect is effective_world
+# the new preset's own keys: their effect is effective_world (folders: null, the world's cases)
+LAYERS = ("size", "sizes", "world", "record_dir", "folders")
 
 
 def _compose(overrides: list[str]):

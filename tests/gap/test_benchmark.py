@@ -127,6 +127,9 @@ def test_how_a_case_is_judged(truth, cause, top, kept, is_found, is_wrong):
     ("occlusion", "tracking_jitter", "tracking_jitter", ["tracking_jitter", "occlusion"], True, False),  # kept
     ("occlusion", "multipath", "multipath", ["multipath"], False, True),
     ("palm", "inconclusive", "tracking_jitter", ["tracking_jitter"], True, False),  # nothing but the floor kept
+    ("palm", "tracking_jitter", "tracking_jitter", ["tracking_jitter"], True, False),  # the floor named: as "none"
+    ("palm", "tracking_jitter", "tracking_jitter", ["tracking_jitter", "noise"], False, False),  # noise kept: misleads
+    ("palm", "noise", "noise", ["noise"], False, True),
     ("none", "tracking_jitter", "tracking_jitter", ["tracking_jitter"], True, False),
 ])
 def test_a_jitter_floor_in_every_case_is_never_a_wrong_cause(truth, cause, top, kept, is_found, is_wrong):

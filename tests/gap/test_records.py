@@ -88,10 +88,11 @@ def test_gap_report_writes_the_table_and_the_published_one_is_current(tmp_path: 
     out = gap_report(["--results", str(tmp_path), "--out", str(tmp_path / "report.md")])
     printed = capsys.readouterr().out
     assert out.read_text() in printed and printed.rstrip().endswith(str(out))
-    # the kept records: the eight base runs, each with its command, commit and world version; docs/gap_report.md
+    # the kept records: the eight base runs, the scatterers world's and its 36 cases as folders, each with its command, commit and world version; docs/gap_report.md
     # is generated from them (make gap-report) and must not drift from them
     published = load_records(REPO / "results" / "gap_benchmark")
     assert {(r["world"], r["size"]) for r in published} == {(w, n) for w in ("default", "heldout", "heldout2", "heldout3")
-                                                            for n in (240, 36)} | {("scatterers", 240), ("scatterers", 36)}
+                                                            for n in (240, 36)} | {("scatterers", 240), ("scatterers", 36),
+                                                                                     ("folders-scatterers_36", 36)}
     assert all(r["command"].startswith("python diagnose.py +experiment=gap_benchmark ") for r in published)
     assert (REPO / "docs" / "gap_report.md").read_text() == summary_markdown(published)

@@ -51,7 +51,8 @@ def found(case: Mapping) -> bool:
     effect in MUST_NOT_MISLEAD also "none", or "inconclusive" with no other effect kept by the greedy
     selection (a record without ``after_effects`` cannot show that). A control is found when it says "none".
     Where effects are present in every case (``also_present``: a world's Leap jitter floor), naming them is
-    right too, and the withheld effect is also found when the greedy selection keeps it."""
+    right too (for a must-not-mislead effect: when nothing else is kept), and the withheld effect is also
+    found when the greedy selection keeps it."""
     truth, cause, truths = case["truth"], case["cause"], withheld(case["truth"])
     present, kept = set(case.get("also_present") or []), case.get("after_effects")
     if truth == "none":
@@ -60,8 +61,8 @@ def found(case: Mapping) -> bool:
         return True
     if present and kept is not None and set(truths) & set(kept):
         return True
-    if truth not in MUST_NOT_MISLEAD or cause not in VERDICTS:
-        return False
+    if truth not in MUST_NOT_MISLEAD or (cause not in VERDICTS and cause not in present):
+        return False  # an effect present everywhere, named, misleads no more than "none" does
     return cause == "none" or (kept is not None and all(e == truth or e in present for e in kept))
 
 
