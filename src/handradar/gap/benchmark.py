@@ -68,12 +68,12 @@ from hydra.utils import instantiate
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_write_text
-from handradar.errors import FormatError, HandradarError
-from handradar.gap.data import load_dataset
-from handradar.gap.diagnosis import diagnose
 from handradar.config import read_yaml
 from handradar.data.convention import ConventionCheck
 from handradar.data.datasets import RecordingsFolder
+from handradar.errors import FormatError, HandradarError
+from handradar.gap.data import load_dataset
+from handradar.gap.diagnosis import diagnose
 from handradar.gap.job import check_convention, headline_metrics, write_outputs
 from handradar.gap.records import benchmark_record, found, record_name, withheld, wrong_cause
 from handradar.gap.report import VERDICTS
@@ -562,8 +562,8 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
         present = folders.present if folders else always_present(worlds.world)
         for case in folders.cases() if folders else cases(list(bench.cases)):
-            recordings = folders and RecordingsFolder(folders.roots[case.name], chain, Path(cfg.paths.cache_dir) / "datasets",
-                                                      skeleton_rate_hz=float(cfg.skeleton_rate_hz))
+            recordings = (RecordingsFolder(folders.roots[case.name], chain, Path(cfg.paths.cache_dir) / "datasets",
+                                           skeleton_rate_hz=float(cfg.skeleton_rate_hz)) if folders else None)
             source = recordings.cache_key() if recordings else worlds.config(case)  # a folder: its files' listing
             key = config_hash("gap-benchmark-case", source, diag_cfg, sim_cfg, radar, chain,
                               package_digest())  # the package's source: a docs-only commit keeps finished cases
@@ -576,7 +576,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             path = recordings.path() if recordings else worlds.dataset(case)
             data = load_dataset(path)
             # another source's folder may break the sign convention: its verdict would not be the simulator's
-            fix = recordings and convention_fix(check_convention(data))
+            fix = convention_fix(check_convention(data)) if recordings else None
             factory = SimFactory.from_config(cfg.sim, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
             diagnosis = diagnose(data, factory, factory.effects,
                                  diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
@@ -584,7 +584,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))
             res = _case_result(case, diagnosis.report, time.perf_counter() - t0, len(data))
             if recordings:
-                res["convention_fix"] = fix or None
+                res["convention_fix"] = fix
             else:
                 clean = clean or worlds.clean()
                 res.update(truth_side(worlds, path, clean, baseline=diagnosis.baseline, rows=diagnosis.evaluation,
