@@ -145,8 +145,10 @@ LEGEND = ("Each column is one benchmark run: for every case, a reference world w
           "(✓): found but undecided, the true effect leading an `inconclusive` verdict (palm: also `none`, or no "
           "other effect kept); ✗: anything else, with what it said (`inconclusive ~N`: about N recordings estimated "
           "to decide it). In brackets the gap_closed of the true effect's candidate. `default` is the world the "
-          "settings were chosen on; the others judge them. Sizes: recordings per case; how each run split its rows "
-          "is under Provenance.")
+          "settings were chosen on; the others judge them. `scatterers` carries a Leap jitter floor in every case: "
+          "naming tracking jitter is never wrong there, and an effect the greedy selection keeps is found. "
+          "`folders-<name>`: folders of recordings judged through ingest (`benchmark.folders`). Sizes: recordings "
+          "per case; how each run split its rows is under Provenance.")
 
 
 def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benchmark") -> str:
