@@ -12,10 +12,12 @@ import torch
 from omegaconf import OmegaConf
 
 from handradar.data.hdf5 import open_writer
+from handradar.errors import FormatError
 from handradar.gap.benchmark import (
     CONTROL_NOTHING,
     BenchmarkWorlds,
     Case,
+    FolderCases,
     case_world,
     cases,
     effect_reference,
@@ -30,6 +32,7 @@ from handradar.gap.records import found, validate_record, wrong_cause
 from handradar.sim.effects import REGISTRY
 from handradar.vocab import EFFECTS as EFFECT_NAMES
 from handradar.world.config import WORLD_VERSION
+from tests.data.writer import Scene, write_recording
 from tests.gap.conftest import rows, simulate
 
 CALLS: list[dict] = []
@@ -116,8 +119,6 @@ def test_inconclusive_shows_its_estimate_and_counts_as_found_only_when_it_leads_
     ("none", "occlusion", "occlusion", ["occlusion"], False, True),
 ])
 def test_how_a_case_is_judged(truth, cause, top, kept, is_found, is_wrong):
-    from handradar.gap.records import found, wrong_cause
-
     case = {"truth": truth, "cause": cause, "top_candidate": top, "after_effects": kept}
     assert (found(case), wrong_cause(case)) == (is_found, is_wrong)
 
@@ -134,8 +135,6 @@ def test_how_a_case_is_judged(truth, cause, top, kept, is_found, is_wrong):
 ])
 def test_a_jitter_floor_in_every_case_is_never_a_wrong_cause(truth, cause, top, kept, is_found, is_wrong):
     from handradar.gap.benchmark import always_present
-    from handradar.gap.records import found, wrong_cause
-
     assert always_present({}) == [] and always_present({"leap": {"jitter_floor_m": 0.0004}}) == ["tracking_jitter"]
     case = {"truth": truth, "cause": cause, "top_candidate": top, "after_effects": kept,
             "also_present": ["tracking_jitter"]}
@@ -332,8 +331,6 @@ def test_benchmark_resumes_finished_cases_and_redoes_only_the_missing_one(tmp_pa
 
 def test_several_effects_withheld_at_once_are_one_case_judged_by_what_is_kept():
     from handradar.gap.benchmark import kept_scores
-    from handradar.gap.records import found, wrong_cause
-
     (case,) = cases(["tracking_jitter+forearm+multipath"])
     assert case.on == ("tracking_jitter", "forearm", "multipath") and case.truth == case.name
     world = case_world({}, case)
@@ -380,9 +377,6 @@ def _folder_manifest(tmp_path, text: str):
     ("folders: {a: [\n", "not readable as YAML: expected the node content"),
 ])
 def test_a_bad_folder_manifest_is_one_line_naming_the_manifest_and_the_problem(tmp_path, text, problem):
-    from handradar.errors import FormatError
-    from handradar.gap.benchmark import FolderCases
-
     path = _folder_manifest(tmp_path, text)
     with pytest.raises(FormatError, match=problem) as err:
         FolderCases.load(path)
@@ -395,9 +389,8 @@ def test_folders_with_known_answers_are_ingested_diagnosed_judged_and_resumed(tm
     """benchmark.folders: two folders of the same 8 recordings of the independent writer, whose one point
     reflector at the hand centre is what the palm effect adds (tests/gap/test_cli.py): listed with truth palm
     the answer is found; listed with truth noise, palm is a wrong cause, unless the manifest says every
-    folder carries palm. A second run resumes every case: nothing is ingested or diagnosed again."""
-    from tests.data.writer import Scene, write_recording
-
+    folder carries palm. A third folder, Doppler-mirrored, is named with its fix. A second run resumes
+    every case: nothing is ingested or diagnosed again."""
     for folder in ("a", "b", "mirrored"):
         for i in range(8):
             write_recording(tmp_path / "held_back" / folder / f"rec{i}",
@@ -441,7 +434,6 @@ def test_case_folders_writes_the_benchmarks_case_worlds_and_a_manifest_the_folde
     """benchmarks/case_folders.py: each case's recordings are that case's world (its truth in meta.json:
     the case's own effect on, every other vocabulary effect off) and the manifest names each folder's answer."""
     from benchmarks.case_folders import main
-    from handradar.gap.benchmark import FolderCases
 
     manifest = main(tmp_path / "cases", [
         "benchmark.size=null", "benchmark.cases=[palm,nothing]", f"paths.cache_dir={tmp_path / 'cache'}",
