@@ -135,3 +135,26 @@ def test_every_entry_point_prints_usage_for_a_missing_value(tmp_path, command, u
     first, second = proc.stderr.splitlines()[-2:]
     assert first.startswith(f"usage: {usage}")
     assert second.startswith(f"error: missing value for {missing} (give ")
+
+
+@pytest.mark.parametrize("user_level", [None, "DEBUG"])
+def test_a_job_keeps_library_banners_out_of_its_log(tmp_path, capsys, monkeypatch, user_level):
+    """run_job (train.py, diagnose.py): Lightning's per-fit banners and MLflow's database set-up lines only
+    from WARNING; a MLFLOW_LOGGING_LEVEL the user set is left alone."""
+    import logging
+
+    from handradar.cli import run_job
+
+    loggers = [logging.getLogger(n) for n in ("lightning.pytorch", "mlflow")]
+    for lg in loggers:
+        monkeypatch.setattr(lg, "level", logging.INFO)  # restored after the test
+    if user_level is None:
+        monkeypatch.delenv("MLFLOW_LOGGING_LEVEL", raising=False)
+    else:
+        monkeypatch.setenv("MLFLOW_LOGGING_LEVEL", user_level)
+    run_job(lambda cfg: tmp_path / "out.json", OmegaConf.create({}), usage="tool")
+    assert capsys.readouterr().out.strip() == str(tmp_path / "out.json")
+    assert loggers[0].level == logging.WARNING
+    assert os.environ["MLFLOW_LOGGING_LEVEL"] == (user_level or "WARNING")
+    assert loggers[1].level == (logging.INFO if user_level else logging.WARNING)
+    monkeypatch.delenv("MLFLOW_LOGGING_LEVEL")  # the job set it for its process; not for the next test

@@ -21,6 +21,19 @@ def run_job(job: Callable[[DictConfig], Path], cfg: DictConfig, *, usage: str | 
 
     from handradar.runs.cli import run_cli
 
+    quiet_libraries()
     path = run_cli(lambda: job(cfg), cfg, usage=usage or f"{Path(sys.argv[0]).name} key=value ...",
                    reraise_in_multirun=True)
     print(path, flush=True)
+
+
+def quiet_libraries() -> None:
+    """Keep a job's own log readable: Lightning's per-fit banners (devices, tips) and MLflow's database
+    set-up lines only from WARNING (a ``MLFLOW_LOGGING_LEVEL`` the user set wins)."""
+    import logging
+    import os
+
+    logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)
+    if "MLFLOW_LOGGING_LEVEL" not in os.environ:
+        os.environ["MLFLOW_LOGGING_LEVEL"] = "WARNING"  # read when mlflow is first imported
+        logging.getLogger("mlflow").setLevel(logging.WARNING)  # ... in case it already was

@@ -186,8 +186,6 @@ class Job:
         cfg = self.cfg
         if cfg.get("threads"):
             torch.set_num_threads(int(cfg.threads))
-        # Lightning's per-fit banners (devices, tips) would bury the job's own log.
-        logging.getLogger("lightning.pytorch").setLevel(logging.WARNING)
         self.stages = Stages(self.stage_names())
         with self.stages("data"):
             real_path, data_hash, jhash = self.load_data()
