@@ -104,7 +104,8 @@ def check_convention(data: GapData) -> ConventionCheck:
     for i in range(len(data)):
         check.add(str(i), check_row(data.measured[i], rows.skeletons[i], rows.masks[i], rows.times,
                                     data.radar, data.chain))
-    (log.warning if check.mirrored() else log.info)("%s", check.message())
+    # ingest's line (if it ran) correlates over each recording's whole skeleton; this one over the rows' windows
+    (log.warning if check.mirrored() else log.info)("diagnosed rows' %s", check.message())
     return check
 
 
