@@ -439,7 +439,7 @@ def test_case_folders_writes_the_benchmarks_case_worlds_and_a_manifest_the_folde
         "benchmark.size=null", "benchmark.cases=[palm,nothing]", f"paths.cache_dir={tmp_path / 'cache'}",
         "+benchmark.world={subjects: 1, repetitions: 1, gestures: [grasp], angles_deg: [0.0]}"])
     folders = FolderCases.load(manifest)
-    assert folders.truths == {"palm": "palm", "nothing": "none"} and folders.present == []
+    assert {c.name: c.truth for c in folders.cases} == {"palm": "palm", "nothing": "none"} and folders.present == []
     for case, on in (("palm", {"palm"}), ("nothing", set())):
         metas = [json.loads(p.read_text()) for p in (tmp_path / "cases" / case).glob("*/meta.json")]
         assert len(metas) == 1 and metas[0]["gesture"] == "grasp"

@@ -241,8 +241,8 @@ class FolderCases:
     """
 
     manifest: Path
-    roots: dict[str, Path]
-    truths: dict[str, str]
+    cases: list[Case]  # a folder's name and truth
+    roots: dict[str, Path]  # by case name
     present: list[str]
 
     @classmethod
@@ -254,27 +254,29 @@ class FolderCases:
         folders = doc.get("folders") if isinstance(doc, dict) else None
         if not isinstance(folders, dict) or not folders:
             raise FormatError(path, "expected a mapping 'folders: {name: {root: DIR, truth: EFFECT}}'")
-        roots, truths = {}, {}
+        roots, listed = {}, []
         for name, entry in folders.items():
             if not isinstance(entry, dict) or not {"root", "truth"} <= set(entry):
                 raise FormatError(path, f"folder {name!r}: expected {{root: DIR, truth: EFFECT}}, found {entry!r}")
             root = (path.parent / str(entry["root"])).expanduser()
             if not root.is_dir():
                 raise FormatError(path, f"folder {name!r}: {root} is not a folder")
-            roots[str(name)], truths[str(name)] = root, truth_of(entry["truth"], f"{path} ({name})")
+            roots[str(name)] = root
+            listed.append(Case(str(name), (), truth_of(entry["truth"], f"{path} ({name})")))
         present = list(doc.get("also_present") or [])
         unknown = [e for e in present if e not in EFFECTS]
         if unknown:
             raise FormatError(path, f"also_present: {', '.join(map(str, unknown))} not in {', '.join(EFFECTS)}")
-        return cls(path, roots, truths, present)
+        return cls(path, listed, roots, present)
 
     @property
     def label(self) -> str:
         """The record's world: ``folders-<the manifest's folder name>``."""
         return f"folders-{self.manifest.parent.name}"
 
-    def cases(self) -> list[Case]:
-        return [Case(name, (), truth) for name, truth in self.truths.items()]
+    def recordings(self, case: Case, chain: ChainConfig, cache_dir: Path, skeleton_rate_hz: float) -> RecordingsFolder:
+        """The case's folder, ingested as ``data=recordings`` ingests it (conf/data/recordings.yaml's defaults)."""
+        return RecordingsFolder(self.roots[case.name], chain, cache_dir, skeleton_rate_hz=skeleton_rate_hz)
 
 
 def convention_fix(check: ConventionCheck) -> str | None:
@@ -561,9 +563,9 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
                      config=OmegaConf.to_container(cfg, resolve=True)):
         clean: Path | None = None  # the effect-free world, built on the first case that is not resumed
         present = folders.present if folders else always_present(worlds.world)
-        for case in folders.cases() if folders else cases(list(bench.cases)):
-            recordings = (RecordingsFolder(folders.roots[case.name], chain, Path(cfg.paths.cache_dir) / "datasets",
-                                           skeleton_rate_hz=float(cfg.skeleton_rate_hz)) if folders else None)
+        for case in folders.cases if folders else cases(list(bench.cases)):
+            recordings = (folders.recordings(case, chain, Path(cfg.paths.cache_dir) / "datasets",
+                                             float(cfg.skeleton_rate_hz)) if folders else None)
             source = recordings.cache_key() if recordings else worlds.config(case)  # a folder: its files' listing
             key = config_hash("gap-benchmark-case", source, diag_cfg, sim_cfg, radar, chain,
                               package_digest())  # the package's source: a docs-only commit keeps finished cases
@@ -575,16 +577,14 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             t0 = time.perf_counter()
             path = recordings.path() if recordings else worlds.dataset(case)
             data = load_dataset(path)
-            # another source's folder may break the sign convention: its verdict would not be the simulator's
-            fix = convention_fix(check_convention(data)) if recordings else None
             factory = SimFactory.from_config(cfg.sim, data.radar, data.chain, skeleton_rate_hz=data.skeleton_rate_hz)
             diagnosis = diagnose(data, factory, factory.effects,
                                  diag_cfg, cache_dir=Path(cfg.paths.cache_dir) / "gap",
                                  progress=bool(cfg.get("progress", True)))
             write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))
             res = _case_result(case, diagnosis.report, time.perf_counter() - t0, len(data))
-            if recordings:
-                res["convention_fix"] = fix
+            if recordings:  # another source's folder may break the sign convention: its verdict is not the simulator's
+                res["convention_fix"] = convention_fix(check_convention(data))
             else:
                 clean = clean or worlds.clean()
                 res.update(truth_side(worlds, path, clean, baseline=diagnosis.baseline, rows=diagnosis.evaluation,
