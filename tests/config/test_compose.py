@@ -19,12 +19,14 @@ from handradar.data.datasets import (
     ReferenceWorld,
     import_callable,
 )
+from handradar.data.measured import MeasuredDataset
 from handradar.models.cgan import Discriminator, Generator
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.runs.mlflow import Tracker
 from handradar.sim.factory import SimFactory
 from handradar.sim.simulator import Simulator
+from handradar.tasks.measured import MEASURED_VARIANTS
 from tests.tasks.fakes import compose_train
 
 REPO = Path(__file__).resolve().parents[2]
@@ -56,7 +58,9 @@ def test_preset_composes_and_instantiates(preset: str, tmp_path: Path):
     tracker = instantiate(cfg.logger)
     assert isinstance(tracker, Tracker) and tracker.tracking_uri == f"sqlite:///{tmp_path}/mlflow/mlflow.db"
     assert tracker.experiment_name == preset
-    assert isinstance(instantiate(cfg.data.dataset), ReferenceWorld)  # the default data: the reference world
+    # the default data: the reference world; the measured preset's: Xia et al.'s manifest
+    data_kind = MeasuredDataset if preset == "measured" else ReferenceWorld
+    assert isinstance(instantiate(cfg.data.dataset), data_kind)
     assert isinstance(instantiate(cfg.radar), RadarConfig) and isinstance(instantiate(cfg.chain), ChainConfig)
     assert callable(instantiate(cfg.synth.provider)) and callable(instantiate(cfg.synth.external_provider))
     sim = SimFactory.from_config(cfg.sim, instantiate(cfg.radar), instantiate(cfg.chain))()
@@ -65,6 +69,9 @@ def test_preset_composes_and_instantiates(preset: str, tmp_path: Path):
         assert list(cfg.variants) == (PAPER_VARIANTS if preset != "data_efficiency" else
                                       ["radar_only", "model_synth", "model_synth_only"])
         assert cfg.split.kind in ("few_shot", "ood")
+    elif preset == "measured":
+        assert callable(import_callable(cfg.job)) and Path(cfg.data.manifest).name == "xia2021.yaml"
+        assert set(cfg.variants) <= set(MEASURED_VARIANTS) and cfg.split.val_per_class > 0
     elif preset == "synth_fit":
         assert callable(import_callable(cfg.job))
         assert [dict(p) for p in cfg.synth_fit.phases] == [{"epochs": 20, "lr": 5e-4, "batch_size": 32},

@@ -118,17 +118,20 @@ def _write_columns(g: h5py.Group, columns: dict[str, list]) -> None:
 
 
 @contextlib.contextmanager
-def open_writer(path: str | Path, *, classes: Sequence[str], radar: RadarConfig, chain: ChainConfig,
+def open_writer(path: str | Path, *, classes: Sequence[str], radar: RadarConfig | None, chain: ChainConfig,
                 skeleton_rate_hz: float, n_steps: int, config_hash: str,
                 extra_attrs: dict | None = None) -> Iterator[DatasetWriter]:
-    """Write a dataset atomically: nothing appears at ``path`` unless the block completes."""
+    """Write a dataset atomically: nothing appears at ``path`` unless the block completes.
+
+    ``radar`` None: no ``radar_cfg`` attribute (measured spectrograms whose radar is not fully known)."""
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as h5:
             h5.attrs["format"] = FORMAT
             h5.attrs["config_hash"] = config_hash
             h5.attrs["code_version"] = code_version()
             h5.attrs["classes"] = json.dumps(list(classes))
-            h5.attrs["radar_cfg"] = radar.to_cfg()
+            if radar is not None:
+                h5.attrs["radar_cfg"] = radar.to_cfg()
             h5.attrs["chain"] = json.dumps(asdict(chain))
             h5.attrs["skeleton_rate_hz"] = float(skeleton_rate_hz)
             for k, v in (extra_attrs or {}).items():

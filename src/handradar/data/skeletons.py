@@ -9,6 +9,8 @@ recording, ...). :func:`iter_source` looks a source up by name.
 - ``dhg``: DHG-14/28 (``n_classes`` 14 or 28; SHREC'17 with ``trim=False``), placed over the radar.
 - ``leap``: a folder of ``handradar.recording/1`` recordings of which only ``leap.jsonl`` and
   ``meta.json`` are read; their calibration already puts them in the radar frame.
+- ``motions``: procedural sequences of the motion library (handradar.hand.motions) for any class
+  vocabulary, ``classes: {class: [motion, ...]}``; it reads no folder.
 
 errors: pass a list to skip bad items (each ``(name, message)`` is appended to it) instead of
 raising FormatError at the first one.
@@ -16,7 +18,7 @@ raising FormatError at the first one.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,6 +28,7 @@ from handradar.data.recording import find_recordings, read_meta
 from handradar.errors import FormatError, HandradarError
 from handradar.hand.importers import dhg, sfinge3d
 from handradar.hand.leap import read_leap_jsonl
+from handradar.hand.motions import MOTIONS, MotionDraw, motion_sequence
 from handradar.hand.placement import DEFAULT_CENTRE_M, place_in_radar
 from handradar.hand.skeleton import HandSequence
 from handradar.vocab import GESTURES
@@ -119,10 +122,46 @@ def leap_items(root: str | Path, *, errors: list | None = None) -> Iterator[Sour
             yield item
 
 
+def motion_classes(classes: Mapping[str, Sequence[str] | str]) -> dict[str, list[str]]:
+    """``{class: [motion, ...]}`` checked: every class names at least one known motion (a bare name is a list of one)."""
+    if not isinstance(classes, Mapping) or not classes:
+        raise ValueError("the motions source needs classes: {class name: [motion, ...]}")
+    out = {}
+    for name, motions in classes.items():
+        motions = [motions] if isinstance(motions, str) else list(motions or [])
+        unknown = [m for m in motions if m not in MOTIONS]
+        if not motions or unknown:
+            raise ValueError(f"class {name!r}: " + (f"unknown motion {unknown[0]!r}" if unknown else "no motion")
+                             + f"; choose from {list(MOTIONS)} (docs/datasets.md#motions)")
+        out[str(name)] = motions
+    return out
+
+
+def motions_items(root: str | Path | None = None, *, classes: Mapping[str, Sequence[str] | str], per_class: int = 100,
+                  seed: int = 0, duration_s: float = 3.2, rate_hz: float = 100.0,
+                  ranges: Mapping[str, Sequence[float]] | None = None, errors: list | None = None) -> Iterator[SourceItem]:
+    """``per_class`` sequences of each class, each of one of its motions (in turn) with a drawn :class:`MotionDraw`.
+
+    Reproducible: item i of class c depends on (seed, c, i) only. ``root`` is unused (no files).
+    """
+    mapping = motion_classes(classes)
+    names = tuple(mapping)
+    for label, (cls, motions) in enumerate(mapping.items()):
+        for i in range(int(per_class)):
+            rng = np.random.default_rng([int(seed), label, i])
+            motion = motions[i % len(motions)]
+            draw = MotionDraw.draw(rng, {k: tuple(v) for k, v in (ranges or {}).items()})
+            seq = motion_sequence(motion, draw, duration_s=duration_s, rate_hz=rate_hz, rng=rng)
+            meta = {"gesture": cls, "motion": motion, "hands": 1, "subject": f"hand{draw.hand_scale:.2f}",
+                    "repetition": i, "recording": f"{cls}/{i}"}
+            yield SourceItem(seq, label, names, f"{cls}/{i}", meta)
+
+
 SOURCES: dict[str, Callable[..., Iterator[SourceItem]]] = {
     "sfinge3d": sfinge3d_items,
     "dhg": dhg_items,
     "leap": leap_items,
+    "motions": motions_items,
 }
 
 
@@ -135,6 +174,8 @@ def source_classes(name: str, **options) -> tuple[str, ...]:
         return dhg.classes(options.get("n_classes", 14))
     if name == "leap":
         return GESTURES
+    if name == "motions":
+        return tuple(motion_classes(options.get("classes") or {}))
     raise ValueError(f"unknown skeleton source {name!r}; expected one of {sorted(SOURCES)}")
 
 

@@ -227,9 +227,9 @@ def source_options(source_cfg: Any) -> tuple[str, str, dict]:
     """(name, root, options) of a ``source`` config node (name, root, and the source's options)."""
     d = OmegaConf.to_container(source_cfg, resolve=True) if isinstance(source_cfg, DictConfig) else dict(source_cfg)
     name, root = d.pop("name", None), d.pop("root", None)
-    if not name or not root:
+    if not name or (not root and name != "motions"):  # the motion library reads no folder
         raise ValueError(f"a skeleton source needs 'name' and 'root', found {sorted(d) + ['name', 'root']}")
-    return str(name), str(root), {k: v for k, v in d.items() if v is not None}
+    return str(name), str(root or ""), {k: v for k, v in d.items() if v is not None}
 
 
 def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, chain: ChainConfig, sim: SimSpec = None,
@@ -269,7 +269,7 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
                                    e.name == "occlusion" for e in simulator.effects) else None)
     caches = DatasetCaches(feats, mask, times, SlotProfileCache(path))
     spec = predict_cached(simulator, net, caches, np.arange(len(items))).numpy().astype(np.float32)
-    classes = source_classes(name, **{k: v for k, v in options.items() if k == "n_classes"})
+    classes = source_classes(name, **{k: v for k, v in options.items() if k in ("n_classes", "classes")})
     h = config_hash(name, root, options, simulator.key(), str(weights), "handradar-synth")
     meta_keys = sorted(set().union(*(it.meta.keys() for it in items)))
     with open_writer(out, classes=classes, radar=radar, chain=chain, skeleton_rate_hz=skeleton_rate_hz,

@@ -1,0 +1,123 @@
+"""The motion library (handradar.hand.motions): each motion's kinematics against its definition, and
+the frame-based Doppler chain the measured datasets use, against the closed-form Doppler row."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from handradar.data.skeletons import motions_items, source_classes
+from handradar.hand.motions import MOTIONS, SWIPE_M, MotionDraw, motion_sequence
+from handradar.radar.chain import ChainConfig, spectrogram_from_profiles, velocity_axis_m_s
+from handradar.radar.config import RadarConfig
+
+CENTRE = [0, 5, 9, 13, 17]
+
+
+def centre(name: str, **draw) -> np.ndarray:
+    seq = motion_sequence(name, MotionDraw(**draw))
+    return seq.positions[:, 0, CENTRE].mean(axis=1)
+
+
+@pytest.mark.parametrize("name, axis, sign", [("swipe_left", 0, -1), ("swipe_right", 0, 1), ("swipe_up", 1, 1),
+                                              ("swipe_down", 1, -1)])
+def test_swipes_travel_their_length_along_their_axis(name, axis, sign):
+    c = centre(name, amplitude=1.2)
+    travel = c[-1] - c[0]
+    assert travel[axis] == pytest.approx(sign * SWIPE_M * 1.2, abs=1e-4)
+    assert np.abs(np.delete(travel, axis)).max() < 1e-6
+
+
+def test_push_and_pull_move_along_the_line_of_sight():
+    for name, sign in (("push", -1), ("pull", 1)):
+        c = centre(name, distance_m=0.3, azimuth_deg=30.0)
+        r = np.linalg.norm(c, axis=1)
+        assert r[-1] - r[0] == pytest.approx(sign * SWIPE_M, abs=1e-3)
+        direction = c[-1] - c[0]
+        sight = np.array([np.sin(np.radians(30)), 0, np.cos(np.radians(30))])
+        assert abs(direction @ sight) == pytest.approx(np.linalg.norm(direction), rel=1e-5)
+
+
+def test_minimum_jerk_timing_follows_speed():
+    """A swipe lasts 0.5 s / speed: 99 % of its travel happens inside that span around its middle."""
+    for speed in (0.5, 1.0, 2.0):
+        seq = motion_sequence("swipe_right", MotionDraw(speed=speed, onset=0.5), duration_s=3.0)
+        x = seq.positions[:, 0, 0, 0]
+        moving = np.flatnonzero(np.abs(np.diff(x)) > 1e-9)
+        span = (moving[-1] - moving[0] + 1) / 100.0
+        assert span == pytest.approx(0.5 / speed, abs=0.02)
+
+
+def test_taps_flex_the_index_toward_the_radar_and_keep_bone_lengths():
+    for name, dips in (("tap", 1), ("double_tap", 2)):
+        seq = motion_sequence(name, MotionDraw(azimuth_deg=0.0))
+        tip_z = seq.positions[:, 0, 8, 2]
+        assert tip_z.min() < tip_z[0] - 0.02            # toward the radar (below the hand, -z)
+        minima = np.flatnonzero((tip_z[1:-1] < tip_z[:-2]) & (tip_z[1:-1] <= tip_z[2:]) & (tip_z[1:-1] < tip_z[0] - 0.01))
+        assert len(minima) == dips
+        lengths = seq.bone_lengths()[:, 0]
+        assert np.ptp(lengths, axis=0).max() < 1e-5     # a rigid skeleton: only joint angles change
+        assert np.ptp(seq.positions[:, 0, 0], axis=0).max() < 1e-7  # the wrist stays
+
+
+def test_pinch_closes_thumb_and_index():
+    seq = motion_sequence("pinch", MotionDraw())
+    gap = np.linalg.norm(seq.positions[:, 0, 4] - seq.positions[:, 0, 8], axis=-1)
+    assert gap.min() < 0.5 * gap[0] and gap[-1] == pytest.approx(gap[0], abs=1e-6)
+
+
+def test_circles_turn_opposite_ways():
+    """circle_ccw turns counter-clockwise in the (x, z) plane (x right, z up): its velocity turns left, the
+    cross product of consecutive velocities is positive wherever it moves; circle_cw the opposite."""
+    def turning(name: str) -> np.ndarray:
+        c = centre(name, azimuth_deg=0.0)
+        v = np.diff(c[:, [0, 2]], axis=0)
+        cross = v[:-1, 0] * v[1:, 1] - v[:-1, 1] * v[1:, 0]
+        return cross[np.linalg.norm(v[:-1], axis=1) > 1e-5]
+    ccw, cw = turning("circle_ccw"), turning("circle_cw")  # float32 joints: a step may read exactly 0
+    assert np.all(ccw >= 0) and np.mean(ccw > 0) > 0.95 and np.all(cw <= 0) and np.mean(cw < 0) > 0.95
+
+
+def test_idle_is_still_and_random_moves_a_little():
+    idle = centre("idle")
+    assert np.ptp(idle, axis=0).max() < 0.003
+    wander = np.ptp(centre("random"), axis=0).max()
+    assert 0.005 < wander < 0.1
+
+
+def test_every_motion_is_a_valid_sequence_and_draws_are_reproducible():
+    rng = np.random.default_rng(0)
+    for name in MOTIONS:
+        seq = motion_sequence(name, MotionDraw.draw(rng), duration_s=1.0, rate_hz=50.0)
+        assert seq.positions.shape == (50, 2, 21, 3) and seq.mask[:, 0].all() and not seq.mask[:, 1].any()
+    with pytest.raises(ValueError, match="unknown motion 'wave'"):
+        motion_sequence("wave", MotionDraw())
+    with pytest.raises(ValueError, match="unknown motion parameter 'size'"):
+        MotionDraw.draw(rng, {"size": (1, 2)})
+    classes = {"a": ["push", "pull"], "b": "tap"}
+    one = [it.sequence.positions for it in motions_items(classes=classes, per_class=3, seed=5)]
+    two = [it.sequence.positions for it in motions_items(classes=classes, per_class=3, seed=5)]
+    assert all(np.array_equal(p, q) for p, q in zip(one, two))
+    assert source_classes("motions", classes=classes) == ("a", "b")
+    items = list(motions_items(classes=classes, per_class=4, seed=5))
+    assert [it.meta["motion"] for it in items[:4]] == ["push", "pull", "push", "pull"]  # each of a class's motions in turn
+
+
+@pytest.mark.parametrize("v_share", [0.25, -0.5, 0.75])
+def test_frame_based_doppler_row_is_the_closed_form(v_share):
+    """Frame-based Doppler (stft_len = stft_hop = loops per frame, one column a frame): a reflector at radial speed
+    v (approaching > 0) has IF slow-time phase -4 pi v t / lambda (docs/architecture.md, sign convention), so its
+    row is n/2 + (2 v / lambda) n T_loop = n/2 + (v / v_max) n / 2 (TI SWRA553: v_max = lambda / (4 T_loop))."""
+    radar = RadarConfig(start_freq_hz=77e9, idle_time_s=400e-6, adc_start_time_s=6e-6, ramp_end_time_s=51.2e-6,
+                        slope_hz_per_s=76.22e12, n_samples=256, sample_rate_hz=10e6, n_loops=32, frame_period_s=0.05)
+    chain = ChainConfig(stft_len=32, stft_hop=32, n_columns=8, clutter_removal=False)
+    v = v_share * radar.max_velocity_m_s
+    t = radar.chirp_times_s(8)[:, :, 0]                                  # (frames, loops)
+    phase = -4 * np.pi * v * t / radar.wavelength_m
+    profiles = torch.as_tensor(np.exp(1j * phase))[:, :, None, None]    # (frames, loops, 1 channel, 1 bin)
+    spec = spectrogram_from_profiles(profiles, chain).numpy()
+    assert spec.shape == (32, 8)
+    expected = 32 // 2 + v_share * 32 / 2
+    assert np.all(np.argmax(spec, axis=0) == round(expected))
+    assert velocity_axis_m_s(radar, chain)[round(expected)] == pytest.approx(v, abs=1e-9)
