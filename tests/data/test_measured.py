@@ -1,5 +1,5 @@
 """Measured spectrogram datasets through their manifest alone (handradar.data.measured), and the
-measured job's split and Doppler mirroring (handradar.tasks.measured)."""
+measured job's split (handradar.tasks.measured)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from handradar.data.datasets import load_arrays
 from handradar.data.hdf5 import read_attrs, validate
 from handradar.data.measured import MeasuredDataset, read_manifest
 from handradar.errors import FormatError
-from handradar.tasks.measured import measured_split, mirror_doppler
+from handradar.tasks.measured import measured_split
 
 SHARED_XIA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "xia2021"
 CLASSES = {"wave": ["swipe_left", "swipe_right"], "poke": ["push"], "still": ["idle"]}
@@ -138,15 +138,6 @@ def test_measured_split_nested_and_validation_fixed():
     assert set(t4) < set(t8) and not set(t8) & set(v8)                # nested across K, disjoint from validation
     assert np.all(splits[t_all] == "train") and len(t_all) + len(v_all) == 45
     assert all(np.count_nonzero(labels[t4] == c) == 4 for c in range(3))
-
-
-def test_mirror_doppler_about_the_zero_row():
-    x = np.zeros((2, 64, 5))
-    x[:, 32 + 7, 1] = 1.0          # 7 rows above zero (row 32)
-    x[:, 32, 2] = 2.0              # zero Doppler stays
-    y = mirror_doppler(x)
-    assert y[0, 32 - 7, 1] == 1.0 and y[0, 32, 2] == 2.0
-    assert np.array_equal(mirror_doppler(y), x)
 
 
 @pytest.mark.skipif(not (SHARED_XIA / "OpenSource").is_dir(), reason="Xia et al.'s DTI images are in ../shared only")

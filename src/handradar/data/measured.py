@@ -393,7 +393,10 @@ def synthesis_radar(m: Manifest, shape: tuple[int, int], values: Mapping[str, fl
     if loop_s <= base.ramp_end_time_s + 1e-6:
         raise ValueError(f"v_max {r['v_max_m_s']:g} m/s needs chirps of {loop_s * 1e6:.1f} us, shorter than the ramp")
     n_loops = int(shape[0])
-    frame_s = max(float(r["frame_period_s"]), n_loops * loop_s * 1.001)  # a frame's chirps fit in its period
+    frame_s = float(r["frame_period_s"])
+    if frame_s < n_loops * loop_s:
+        raise ValueError(f"{n_loops} chirp loops of {loop_s * 1e3:.3f} ms (v_max {r['v_max_m_s']:g} m/s) do not fit in a "
+                         f"{frame_s * 1e3:g} ms frame")
     return RadarConfig(start_freq_hz=base.start_freq_hz, idle_time_s=loop_s - base.ramp_end_time_s,
                        adc_start_time_s=base.adc_start_time_s, ramp_end_time_s=base.ramp_end_time_s,
                        slope_hz_per_s=base.slope_hz_per_s, n_samples=base.n_samples, sample_rate_hz=base.sample_rate_hz,

@@ -16,31 +16,35 @@ and ``synth.measured`` for its unknowns. Variants (``MEASURED_VARIANTS``):
 - ``model_synth_only``: the synthetic rows alone (K = 0 is this variant alone);
 - ``synth_pretrain``: trained on the synthetic rows, then fine-tuned on the K real rows.
 
-Metrics: ``val/acc_<variant>`` and ``test/acc_<variant>_<split>`` for each test split.
+Metrics: ``val/acc_<variant>`` and ``test/acc_<variant>_<split>`` for each test split. The run folder also holds
+the unpaired gap report of the synthetic rows against the measured rows the fit saw (handradar.gap.unpaired).
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import h5py
 import numpy as np
 from omegaconf import OmegaConf
 
-from handradar.atomic import atomic_path
+from handradar.atomic import atomic_write_text
 from handradar.data.datamodule import FileRows
 from handradar.data.datasets import load_arrays
-from handradar.data.hdf5 import read_attrs
-from handradar.data.measured import UNKNOWN, Manifest, dataset_chain, synthesis_radar
 from handradar.data.splits import _class_permutation
 from handradar.errors import FormatError, TooFewRows
+from handradar.gap.unpaired import write_unpaired_gap
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import config_hash
-from handradar.synthesis.providers import synthesize_source
+from handradar.synthesis.measured import (
+    DEEP_FLOOR_DB,
+    UnknownsFit,
+    fit_unknowns,
+    measured_manifest,
+    synthesize_measured,
+)
 from handradar.tasks.classify import evaluate
 
 if TYPE_CHECKING:
@@ -71,82 +75,89 @@ def measured_split(labels: np.ndarray, splits: np.ndarray, *, train: str, per_cl
     return np.sort(np.concatenate(train_rows)), np.sort(np.concatenate(val_rows))
 
 
-def synthesize_measured(real_path: Path, values: dict, *, per_class: int, seed: int, cache_dir: Path,
-                        sim: dict | None) -> Path:
-    """Synthetic rows of the dataset's classes from their motions (cached by everything that makes them);
-    Doppler mirrored when ``values["approaching"]`` is ``low`` (the dataset's approaching end)."""
-    attrs = read_attrs(real_path)
-    m = Manifest.from_dict(json.loads(attrs["manifest"]), real_path)  # as the file was built: the manifest may have moved
-    shape = (attrs["chain"].stft_len, attrs["chain"].n_columns)
-    radar = synthesis_radar(m, shape, values)
-    chain = dataset_chain(m, shape)
-    if values.get("dynamic_range_db") is not None:
-        chain = type(chain)(**{**chain.__dict__, "dynamic_range_db": float(values["dynamic_range_db"])})
-    duration = shape[1] * radar.frame_period_s
-    source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
-              "duration_s": duration, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
-    out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, chain, sim, values, 'measured/1')}.h5"
-    if not out.is_file():
-        log.info("synthesising %d rows per class of %d classes (v_max %.2f m/s, %.1f ms per column)", per_class,
-                 len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3)
-        synthesize_source(source, out, radar=radar, chain=chain, sim=sim, cache_dir=Path(cache_dir) / "profiles",
-                          progress=False)
-    if values.get("approaching", "high") == "low":
-        mirrored = out.with_name(out.stem + "-mirrored.h5")
-        if not mirrored.is_file():
-            mirror_file(out, mirrored)
-        out = mirrored
-    return out
+def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
+    """The manifest's unknowns: set in ``synth.measured.unknowns``, else fitted (unpaired, :func:`fit_unknowns`) on
+    ``fit_rows``; the fit is cached under the synthesis cache and logged (``synth.fitted.*``)."""
+    cfg = job.cfg.synth.measured
+    m, _ = measured_manifest(job.real.path)
+    given = {k: v for k, v in OmegaConf.to_container(cfg.unknowns, resolve=True).items() if v is not None}
+    fit = OmegaConf.to_container(cfg.fit, resolve=True)
+    grid = {}
+    for k, candidates in fit["grid"].items():
+        if k in given:
+            grid[k] = [given[k]]
+        elif k == "approaching":  # rows of a manifest that states it are already in the project's orientation
+            grid[k] = list(candidates) if m.approaching == "unknown" else ["high"]
+        else:
+            grid[k] = list(candidates) if m.radar[k] == "unknown" else [m.radar[k]]
+    if all(len(v) == 1 for v in grid.values()):
+        return {k: v[0] for k, v in grid.items()}
+    sim = OmegaConf.to_container(job.cfg.sim, resolve=True)
+    key = config_hash(grid, fit, sim, job.real.path.name, fit_rows.tolist())
+    out = Path(job.cfg.synth.cache_dir) / f"measured-fit-{key}.json"
+    if out.is_file():
+        result = json.loads(out.read_text())
+    else:
+        n_classes = len(job.real.classes)
 
+        def simulate(v_max: float, frame_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+            try:
+                path = synthesize_measured(job.real.path, {"v_max_m_s": v_max, "frame_period_s": frame_s,
+                                                           "dynamic_range_db": DEEP_FLOOR_DB},
+                                           per_class=int(fit["per_class"]), seed=int(fit["seed"]),
+                                           cache_dir=Path(job.cfg.synth.cache_dir), sim=sim)
+            except ValueError as exc:  # chirps that do not fit in the frame: no candidate
+                log.info("fit: v_max %g m/s, %g ms a column skipped (%s)", v_max, frame_s * 1e3, exc)
+                return None
+            d = load_arrays(path)
+            return d.x, d.y
 
-def mirror_doppler(x: np.ndarray) -> np.ndarray:
-    """Spectrograms (..., doppler, columns) with the Doppler axis mirrored about the zero row ``doppler // 2``."""
-    n = x.shape[-2]
-    return np.roll(x[..., ::-1, :], 1 - n % 2, axis=-2)
-
-
-def mirror_file(src: Path, dst: Path) -> None:
-    """A copy of dataset file ``src`` at ``dst`` with every spectrogram Doppler-mirrored (atomically)."""
-    with atomic_path(dst) as tmp:
-        shutil.copyfile(src, tmp)
-        with h5py.File(tmp, "r+") as h5:
-            h5["spectrograms"][...] = mirror_doppler(h5["spectrograms"][()])
-            h5.attrs["doppler"] = "mirrored"
+        log.info("fitting %s on %d measured rows (unpaired: class means)",
+                 ", ".join(k for k, v in grid.items() if len(v) > 1), len(fit_rows))
+        result: UnknownsFit = fit_unknowns(job.real.x[fit_rows], job.real.y[fit_rows], n_classes, simulate, grid,
+                                           n_boot=int(fit["n_boot"]), seed=int(fit["seed"]))
+        result = result.as_dict()
+        atomic_write_text(out, json.dumps(result, indent=1))
+    log.info("fitted: %s", UnknownsFit(**{k: result[k] for k in ("values", "candidates", "shares", "ranges",
+                                                                    "n_rows")}).summary())
+    job.tracker.log_params({f"synth.fitted.{k}": v for k, v in result["values"].items()})
+    job.tracker.log_artifact(out, "synthesis")
+    return result["values"]
 
 
 def run_measured(job: Job) -> dict[str, float]:
     """The job kind ``handradar.tasks.measured.run_measured`` (see the module docstring)."""
     cfg, real = job.cfg, job.real
-    attrs = read_attrs(real.path)
-    if attrs.get("skeletons") != "none" or "manifest" not in attrs:
-        raise FormatError(real.path, "the measured job needs a measured dataset (data=measured data.manifest=FILE)")
-    manifest = json.loads(attrs["manifest"])
+    m, _ = measured_manifest(real.path)
     split_of = real.meta["split"]
     per_class = cfg.split.per_class
     per_class = "all" if str(per_class) == "all" else int(per_class)
-    train, val = measured_split(real.y, split_of, train=manifest["train"], per_class=per_class,
-                                val_per_class=int(cfg.split.val_per_class), seed=job.seed,
-                                test_seed=int(cfg.split.get("test_seed", 0)))
-    tests = {s: np.flatnonzero(split_of == s) for s in manifest["test"]}
+    split = dict(train=m.train, val_per_class=int(cfg.split.val_per_class), test_seed=int(cfg.split.get("test_seed", 0)))
+    train, val = measured_split(real.y, split_of, per_class=per_class, seed=job.seed, **split)
+    tests = {s: np.flatnonzero(split_of == s) for s in m.test}
     job.tracker.log_params({"split_sizes.train": len(train), "split_sizes.val": len(val),
                             **{f"split_sizes.test_{s}": len(r) for s, r in tests.items()}})
-    names = [v for v in cfg.variants if v in MEASURED_VARIANTS]
     unknown = sorted(set(cfg.variants) - set(MEASURED_VARIANTS))
     if unknown:
         raise ValueError(f"unknown measured variant {unknown[0]!r}; choose from {list(MEASURED_VARIANTS)}")
-    if per_class == 0:
-        names = [v for v in names if v == "model_synth_only"]
+    names = [v for v in cfg.variants if per_class != 0 or v == "model_synth_only"]
     n_classes = len(real.classes)
-    synth_cfg = cfg.synth.measured
-    values = {k: v for k, v in OmegaConf.to_container(synth_cfg.unknowns, resolve=True).items() if v not in (None, UNKNOWN)}
     synthetic: Path | None = None
     if any(v != "radar_only" for v in names):
-        synthetic = synthesize_measured(real.path, values, per_class=int(synth_cfg.per_class), seed=job.seed,
+        fit_on = str(cfg.synth.measured.fit.rows)
+        if fit_on not in ("pool", "train"):
+            raise ValueError(f"synth.measured.fit.rows must be pool or train, found {fit_on!r}")
+        fit_rows = train if fit_on == "train" else measured_split(real.y, split_of, per_class="all", seed=0, **split)[0]
+        values = fitted_unknowns(job, fit_rows)
+        synthetic = synthesize_measured(real.path, values, per_class=int(cfg.synth.measured.per_class), seed=job.seed,
                                         cache_dir=Path(cfg.synth.cache_dir),
                                         sim=OmegaConf.to_container(cfg.sim, resolve=True))
-        synth_y = load_arrays(synthetic).y
-        if not np.array_equal(np.unique(synth_y), np.arange(n_classes)):
+        synth = load_arrays(synthetic)
+        if not np.array_equal(np.unique(synth.y), np.arange(n_classes)):
             raise FormatError(synthetic, "synthetic rows do not cover every class of the dataset")
+        if job.rank_zero:  # where synthetic differs from the measured rows the fit saw (unpaired)
+            for f in write_unpaired_gap(real.x[fit_rows], real.y[fit_rows], synth.x, synth.y, real.classes, job.run_dir):
+                job.tracker.log_artifact(f, "unpaired_gap")
 
     def score(net) -> dict:
         out = {}
@@ -170,8 +181,7 @@ def run_measured(job: Job) -> dict[str, float]:
 
         results[name] = job.cached(name, compute)
         r = results[name]["scores"]
-        log.info("%s: validation %.3f; %s", name, r["val"]["acc"],
-                 ", ".join(f"test {s} {r[s]['acc']:.3f}" for s in tests))
+        log.info("%s: validation %.3f; %s", name, r["val"]["acc"], ", ".join(f"test {s} {r[s]['acc']:.3f}" for s in tests))
     metrics = {}
     for name, res in results.items():
         metrics[f"val/acc_{name}"] = res["scores"]["val"]["acc"]

@@ -1,0 +1,189 @@
+"""Synthetic rows for a measured dataset without skeletons, and the unpaired fit of what its manifest leaves unknown.
+
+Synthesis (:func:`synthesize_measured`): the dataset's classes become skeletons through their
+motions (the ``motions`` source, handradar.hand.motions), simulated by the paper's model with a
+radar whose frame-based Doppler map has the dataset's grid (handradar.data.measured.synthesis_radar).
+
+The fit (:func:`fit_unknowns`, docs/datasets.md#measured-radar-datasets): no measured row has a
+skeleton, so nothing is paired. For every candidate of the unknowns the synthetic rows' class-mean
+images are compared with the measured rows' class means: the objective is 1 - SSIM averaged over
+classes (torchmetrics SSIM, ``data_range=1.0``). Two unknowns cost no new simulation and are exact:
+
+- the dB floor: rows synthesised with a deep floor D0 are re-floored at any D <= D0 by
+  ``clip((x D0 - (D0 - D)) / D, 0, 1)`` (a spectrogram in [0, 1] is ``(dB - peak + D0) / D0``);
+- which end of the Doppler axis is approaching: a mirror about the zero row.
+
+The loop period (v_max) and the time per column need a simulation each. The uncertainty is a
+bootstrap over the measured rows (classes resampled within themselves): the share of resamples that
+choose each candidate value, and the 2.5-97.5 % range of the chosen values.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+import shutil
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from handradar.atomic import atomic_path
+from handradar.data.hdf5 import read_attrs
+from handradar.data.measured import Manifest, dataset_chain, synthesis_radar
+from handradar.metrics import per_example_ssim
+from handradar.provenance import config_hash
+from handradar.synthesis.providers import synthesize_source
+
+log = logging.getLogger(__name__)
+
+DEEP_FLOOR_DB = 60.0  # the floor rows are synthesised at before the fit re-floors them
+
+
+def mirror_doppler(x: np.ndarray) -> np.ndarray:
+    """Spectrograms (..., doppler, columns) with the Doppler axis mirrored about the zero row ``doppler // 2``."""
+    n = x.shape[-2]
+    return np.roll(x[..., ::-1, :], 1 - n % 2, axis=-2)
+
+
+def refloor(x: np.ndarray, from_db: float, to_db: float) -> np.ndarray:
+    """Spectrograms in [0, 1] with a floor ``from_db`` below their peak, re-expressed with the floor at ``to_db`` (<= from_db)."""
+    if to_db > from_db:
+        raise ValueError(f"cannot lower a {from_db:g} dB floor to {to_db:g} dB: what lay below it is lost")
+    return np.clip((x * from_db - (from_db - to_db)) / to_db, 0.0, 1.0).astype(np.float32)
+
+
+def measured_manifest(real_path: str | Path) -> tuple[Manifest, tuple[int, int]]:
+    """The manifest a measured dataset file was built from, and its (doppler, columns) grid."""
+    attrs = read_attrs(real_path)
+    if attrs.get("skeletons") != "none" or "manifest" not in attrs:
+        from handradar.errors import FormatError
+
+        raise FormatError(real_path, "not a measured dataset (data=measured data.manifest=FILE builds one)")
+    return Manifest.from_dict(json.loads(attrs["manifest"]), Path(real_path)), (attrs["chain"].stft_len,
+                                                                                attrs["chain"].n_columns)
+
+
+def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str], *, per_class: int, seed: int,
+                        cache_dir: str | Path, sim: Mapping | None = None) -> Path:
+    """Synthetic rows of a measured dataset's classes (cached by everything that makes them), mirrored when
+    ``values["approaching"]`` is ``low``; ``values`` holds the manifest's unknowns (``v_max_m_s``,
+    ``frame_period_s``, ``dynamic_range_db``)."""
+    m, shape = measured_manifest(real_path)
+    radar = synthesis_radar(m, shape, values)
+    chain = dataset_chain(m, shape)
+    if values.get("dynamic_range_db") is not None:
+        chain = replace(chain, dynamic_range_db=float(values["dynamic_range_db"]))
+    source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
+              "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
+    out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, chain, dict(sim or {}), 'measured/1')}.h5"
+    if not out.is_file():
+        log.info("synthesising %d rows per class of %d classes (v_max %.2f m/s, %.1f ms per column)", per_class,
+                 len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3)
+        synthesize_source(source, out, radar=radar, chain=chain, sim=dict(sim or {}) or None,
+                          cache_dir=Path(cache_dir) / "profiles", progress=False)
+    if values.get("approaching", "high") == "low":
+        mirrored = out.with_name(out.stem + "-mirrored.h5")
+        if not mirrored.is_file():
+            with atomic_path(mirrored) as tmp:
+                shutil.copyfile(out, tmp)
+                with h5py.File(tmp, "r+") as h5:
+                    h5["spectrograms"][...] = mirror_doppler(h5["spectrograms"][()])
+                    h5.attrs["doppler"] = "mirrored"
+        out = mirrored
+    return out
+
+
+def class_means(x: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
+    """(n_classes, doppler, columns) mean image of each class; a class without rows is an error."""
+    counts = np.bincount(y, minlength=n_classes)
+    if counts.min() == 0:
+        raise ValueError(f"class {int(np.argmin(counts))} has no row to take a mean of")
+    return np.stack([x[y == c].mean(axis=0) for c in range(n_classes)])
+
+
+def mean_gap(real_means: np.ndarray, synth_means: np.ndarray) -> float:
+    """1 - SSIM of the class-mean images, averaged over classes."""
+    return float(1.0 - per_example_ssim(real_means, synth_means).mean())
+
+
+@dataclass
+class UnknownsFit:
+    """The chosen values, every candidate's objective, and the bootstrap's verdict on each unknown."""
+
+    values: dict[str, float | str]
+    candidates: list[dict]          # {unknown: value, ..., "gap": objective}
+    shares: dict[str, dict]         # unknown -> {candidate value: share of bootstrap resamples choosing it}
+    ranges: dict[str, list]         # numeric unknown -> [2.5 %, 97.5 %] of the bootstrap's chosen values
+    n_rows: int
+
+    def as_dict(self) -> dict:
+        return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
+                "n_rows": self.n_rows, "objective": "1 - SSIM of class-mean images, mean over classes"}
+
+    def summary(self) -> str:
+        parts = []
+        for k, v in self.values.items():
+            share = self.shares[k].get(str(v), 0.0)
+            rng = f" [{self.ranges[k][0]:g}, {self.ranges[k][1]:g}]" if k in self.ranges else ""
+            parts.append(f"{k} {v}{rng} (chosen by {share:.0%} of resamples)")
+        return "; ".join(parts)
+
+
+def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
+                 simulate: Callable[[float, float], tuple[np.ndarray, np.ndarray] | None],
+                 grid: Mapping[str, Sequence], *, n_boot: int = 200, seed: int = 0) -> UnknownsFit:
+    """Choose the unknowns whose synthetic class means are closest to the measured ones (module docstring).
+
+    simulate(v_max_m_s, frame_period_s) -> (x, y): synthetic rows at a floor of ``DEEP_FLOOR_DB``, approaching high;
+    None where that pair is no candidate (a frame too short for its chirps).
+    grid: candidate lists for ``v_max_m_s``, ``frame_period_s``, ``dynamic_range_db`` (each <= DEEP_FLOOR_DB) and
+    ``approaching`` (``high`` / ``low``); a single-value list fixes that unknown.
+    """
+    names = ("v_max_m_s", "frame_period_s", "dynamic_range_db", "approaching")
+    missing = [k for k in names if not grid.get(k)]
+    if missing:
+        raise ValueError(f"the fit needs candidates for {missing[0]}")
+    combos, synth_means = [], []
+    for v_max, frame in itertools.product(grid["v_max_m_s"], grid["frame_period_s"]):
+        made = simulate(float(v_max), float(frame))
+        if made is None:
+            continue
+        x, y = made
+        for floor in grid["dynamic_range_db"]:
+            xf = refloor(x, DEEP_FLOOR_DB, float(floor))
+            for approaching in grid["approaching"]:
+                xs = mirror_doppler(xf) if approaching == "low" else xf
+                combos.append({"v_max_m_s": float(v_max), "frame_period_s": float(frame),
+                               "dynamic_range_db": float(floor), "approaching": str(approaching)})
+                synth_means.append(class_means(xs, y, n_classes))
+    if not combos:
+        raise ValueError("no candidate of the grid could be simulated")
+    synth_means = np.stack(synth_means)  # (combos, classes, doppler, columns)
+
+    def objectives(real_means: np.ndarray) -> np.ndarray:
+        flat = np.broadcast_to(real_means, synth_means.shape).reshape(-1, *real_means.shape[-2:])
+        s = per_example_ssim(flat, synth_means.reshape(-1, *real_means.shape[-2:])).reshape(len(combos), n_classes)
+        return 1.0 - s.mean(axis=1)
+
+    gaps = objectives(class_means(real_x, real_y, n_classes))
+    best = int(np.argmin(gaps))
+    rng = np.random.default_rng(seed)
+    members = [np.flatnonzero(real_y == c) for c in range(n_classes)]
+    chosen = []
+    for _ in range(n_boot):
+        rows = np.concatenate([rng.choice(m, size=len(m)) for m in members])
+        chosen.append(int(np.argmin(objectives(class_means(real_x[rows], real_y[rows], n_classes)))))
+    shares = {k: {} for k in names}
+    for i in chosen:
+        for k in names:
+            key = str(combos[i][k])
+            shares[k][key] = shares[k].get(key, 0.0) + 1.0 / n_boot
+    ranges = {k: [float(np.percentile([combos[i][k] for i in chosen], q)) for q in (2.5, 97.5)]
+              for k in names if k != "approaching"}
+    candidates = [{**c, "gap": float(g)} for c, g in zip(combos, gaps)]
+    return UnknownsFit(values=dict(combos[best]), candidates=candidates, shares=shares, ranges=ranges,
+                       n_rows=int(len(real_y)))

@@ -1,0 +1,82 @@
+"""The unpaired fit of a measured dataset's unknowns (handradar.synthesis.measured), checked on simulated rows
+whose truth is known, and its two exact shortcuts (the dB floor, the Doppler mirror) against the chain itself."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from handradar.data.datasets import load_arrays
+from handradar.data.measured import MeasuredDataset
+from handradar.radar.chain import ChainConfig, power_to_unit
+from handradar.synthesis.measured import DEEP_FLOOR_DB, fit_unknowns, mirror_doppler, refloor, synthesize_measured
+
+CLASSES = {"push": ["push"], "pull": ["pull"], "swipe": ["swipe_right"]}
+TRUTH = {"v_max_m_s": 2.0, "frame_period_s": 0.04, "dynamic_range_db": 20.0, "approaching": "low"}
+
+
+def test_refloor_is_the_chain_at_a_shallower_floor():
+    power = torch.rand(4, 16, 8, dtype=torch.float64) ** 8 * 1e3  # several decades of power
+    deep = power_to_unit(power, ChainConfig(dynamic_range_db=60.0)).numpy()
+    for floor in (10.0, 25.0, 60.0):
+        direct = power_to_unit(power, ChainConfig(dynamic_range_db=floor)).numpy()
+        np.testing.assert_allclose(refloor(deep, 60.0, floor), direct, atol=1e-6)
+    with pytest.raises(ValueError, match="cannot lower"):
+        refloor(deep, 20.0, 30.0)
+
+
+def measured_stand_in(root: Path, n: int = 8) -> Path:
+    """A measured dataset (NPY rows, 32 Doppler x 16 frames, approaching at the *low* rows) whose rows are the
+    simulator's at TRUTH, another seed than the fit's: what the fit must recover."""
+    manifest = {"format": "handradar.measured/1", "name": "known", "root": ".",
+                "rows": {"layout": "{split}/{class}/*.npy", "splits": {"train": "train", "test": "test"}},
+                "axes": {"doppler": "rows", "approaching": "unknown"}, "values": [0, 1],
+                "radar": {"carrier_hz": 77e9, "clutter_removal": True}, "classes": CLASSES}
+    for split in ("train", "test"):
+        for c in CLASSES:
+            (root / split / c).mkdir(parents=True)
+            np.save(root / split / c / "0.npy", np.zeros((32, 16), np.float32))
+    (root / "m.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
+    template = MeasuredDataset(root / "m.yaml", root / "cache").path()  # the grid and classes the truth needs
+    truth = load_arrays(synthesize_measured(template, TRUTH, per_class=n, seed=99, cache_dir=root / "synth"))
+    for i, (x, y) in enumerate(zip(truth.x, truth.y)):
+        np.save(root / "train" / list(CLASSES)[y] / f"{i + 1}.npy", x)
+    return MeasuredDataset(root / "m.yaml", root / "cache").path()
+
+
+def test_fit_recovers_known_unknowns(tmp_path):
+    real_path = measured_stand_in(tmp_path)
+    real = load_arrays(real_path)
+    rows = np.flatnonzero((real.meta["split"] == "train") & (real.x.max(axis=(1, 2)) > 0))  # the simulated rows
+
+    def simulate(v_max: float, frame_s: float):
+        try:
+            d = load_arrays(synthesize_measured(real_path, {"v_max_m_s": v_max, "frame_period_s": frame_s,
+                                                            "dynamic_range_db": DEEP_FLOOR_DB},
+                                                per_class=8, seed=0, cache_dir=tmp_path / "synth"))
+        except ValueError:
+            return None
+        return d.x, d.y
+
+    grid = {"v_max_m_s": [0.5, 2.0, 4.0], "frame_period_s": [0.04, 0.08], "dynamic_range_db": [10.0, 20.0, 40.0],
+            "approaching": ["high", "low"]}
+    fit = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulate, grid, n_boot=50, seed=0)
+    assert fit.values == TRUTH
+    assert fit.shares["approaching"]["low"] > 0.9 and fit.n_rows == 24
+    # v_max 0.5 m/s needs 32 loops of 1.95 ms: no 40 ms frame holds them, so that pair is no candidate
+    assert not any(c["v_max_m_s"] == 0.5 and c["frame_period_s"] == 0.04 for c in fit.candidates)
+    assert len(fit.candidates) == 5 * 3 * 2
+    assert fit.ranges["dynamic_range_db"][0] <= 20.0 <= fit.ranges["dynamic_range_db"][1]
+
+
+def test_mirror_doppler_about_the_zero_row():
+    x = np.zeros((2, 64, 5))
+    x[:, 32 + 7, 1] = 1.0          # 7 rows above zero (row 32)
+    x[:, 32, 2] = 2.0              # zero Doppler stays
+    y = mirror_doppler(x)
+    assert y[0, 32 - 7, 1] == 1.0 and y[0, 32, 2] == 2.0
+    assert np.array_equal(mirror_doppler(y), x)
