@@ -203,6 +203,47 @@ def test_motion_window_picks_the_gesture():
     np.testing.assert_allclose(ws.positions[-1], pos[9], atol=1e-6)
 
 
+def test_motions_source_config():
+    """conf/source/motions.yaml: the motion library's eight default classes, read from no folder."""
+    from hydra import compose, initialize_config_dir
+
+    from handradar.config import config_dir
+    from handradar.data.skeletons import iter_source, source_classes
+    from handradar.synthesis.providers import source_options
+
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = compose("synth", overrides=["source=motions", "out=x.h5"])
+    name, root, options = source_options(cfg.source)
+    classes = ("push", "pull", "swipe_left", "swipe_right", "tap", "pinch", "circle", "idle")
+    assert (name, root, options["per_class"], options["seed"], options["duration_s"]) == ("motions", "", 50, 0, 3.2)
+    assert source_classes(name, classes=options["classes"]) == classes
+    items = list(iter_source(name, root, **{**options, "per_class": 2}))
+    assert [(it.label, it.meta["motion"]) for it in items[12:14]] == [(6, "circle_cw"), (6, "circle_ccw")]
+    assert [it.name for it in items[::2]] == [f"{c}/0" for c in classes]
+    assert all(it.sequence.times[-1] == pytest.approx(3.2, abs=0.011) for it in items)
+
+
+def test_handradar_synth_on_the_motion_library(tmp_path):
+    """handradar-synth source=motions (conf/source/motions.yaml: no folder read) with its classes replaced as
+    docs/datasets.md#motions shows: per_class rows a class, each class's motions in turn."""
+    out = tmp_path / "motions.h5"
+    exe = Path(sys.executable).with_name("handradar-synth")
+    res = subprocess.run([str(exe), "source=motions", "source.per_class=2", "~source.classes",
+                          "+source.classes={push: [push], circle: [circle_cw, circle_ccw]}", f"out={out}",
+                          f"paths.log_dir={tmp_path}/logs", f"synth.cache_dir={tmp_path}/cache", "chain.n_columns=8"],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip().splitlines()[-1] == str(out)
+    assert validate(out) == 4
+    with h5py.File(out) as h5:
+        assert json.loads(h5.attrs["classes"]) == ["push", "circle"]
+        assert h5["labels"][()].tolist() == [0, 0, 1, 1]
+        assert [m.decode() for m in h5["meta"]["motion"][()]] == ["push", "push", "circle_cw", "circle_ccw"]
+        spec = h5["spectrograms"][()]
+    assert spec.shape == (4, 64, 8) and spec.max() == 1.0
+    assert not np.allclose(spec[0], spec[2], atol=0.05)  # a push is not a circle
+
+
 def test_handradar_synth_on_sfinge3d_subset(sfinge3d_dir, tmp_path):
     """The console script on two SFINGE3D classes: a valid dataset with the source's labels."""
     root = tmp_path / "sf"

@@ -1,4 +1,4 @@
-"""``handradar-fetch dataset=sfinge3d|dhg [out=DIR] [fetch.url=URL]``: an external skeleton dataset."""
+"""``handradar-fetch dataset=sfinge3d|dhg|xia2021 [out=DIR] [fetch.url=URL]``: an external dataset."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from omegaconf import DictConfig
 from handradar.config import VERSION_BASE, config_dir
 from handradar.runs.cli import hydra_overrides_checked, run_cli
 
-USAGE = "handradar-fetch dataset=sfinge3d|dhg [out=DIR] [fetch.url=URL] [fetch.txt_only=false]"
+USAGE = "handradar-fetch dataset=sfinge3d|dhg|xia2021 [out=DIR] [fetch.url=URL] [fetch.txt_only=false]"
 
 
 @hydra_overrides_checked(USAGE)

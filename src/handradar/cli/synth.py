@@ -1,4 +1,5 @@
-"""``handradar-synth source=sfinge3d|dhg|leap source.root=DIR out=FILE.h5 [synth.weights=CKPT]``."""
+"""``handradar-synth source=sfinge3d|dhg|leap|motions source.root=DIR out=FILE.h5 [synth.weights=CKPT]``
+(motions: no source.root)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from omegaconf import DictConfig
 from handradar.config import VERSION_BASE, config_dir
 from handradar.runs.cli import hydra_overrides_checked, run_cli
 
-USAGE = "handradar-synth source=sfinge3d|dhg|leap source.root=DIR out=FILE.h5 [synth.weights=CKPT] [key=value ...]"
+USAGE = "handradar-synth source=sfinge3d|dhg|leap|motions source.root=DIR out=FILE.h5 [synth.weights=CKPT] [key=value ...]"
 
 
 @hydra_overrides_checked(USAGE)

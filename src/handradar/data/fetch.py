@@ -1,4 +1,4 @@
-"""External skeleton datasets onto this machine: ``handradar-fetch dataset=sfinge3d|dhg``.
+"""External datasets onto this machine: ``handradar-fetch dataset=sfinge3d|dhg|xia2021``.
 
 - ``sfinge3d``: ``git clone --depth 1`` of the dataset's public repository (SFINGE3D/DatasetV1),
   checked for the Dictionary's 13 classes x 36 instances (``Dictionary/<1..13>/<1..36>.txt``, as
@@ -7,6 +7,10 @@
   ``.txt`` files: the skeletons and the start/end table, not the depth images), checked against its
   own manifest: ``informations_troncage_sequences.txt`` lists every sequence, each of which must
   have its ``gesture_g/finger_f/subject_s/essai_e/skeleton_world.txt``.
+- ``xia2021``: the measured DTI images of Xia et al. (IEEE TGRS 2021), ``git clone --depth 1`` of a
+  public mirror of the authors' repository, checked against conf/manifests/xia2021.yaml: every class
+  folder of every split its ``rows.layout`` names holds the published number of PNGs (400 per class
+  in ``trainset``, 50 in each held-out user's ``Atestset`` and ``Btestset``).
 
 Every fetch is atomic: it works in a temporary folder beside the target (``.<name>.*.part``),
 checks it, then renames it onto the target; on any failure (or Ctrl-C) the temporary folder is
@@ -24,15 +28,20 @@ import tempfile
 import urllib.error
 import urllib.request
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path, PurePosixPath
 
+from handradar.config import config_dir
 from handradar.errors import FormatError, HandradarError
 from handradar.hand.importers import dhg, sfinge3d
 
-DATASETS = ("sfinge3d", "dhg")
+DATASETS = ("sfinge3d", "dhg", "xia2021")
 SFINGE3D_INSTANCES = 36  # per class, Dictionary/<class>/<1..36>.txt (the dataset's README)
+XIA2021_MANIFEST = "manifests/xia2021.yaml"  # under conf/: the layout, split folders and classes checked
+XIA2021_PER_CLASS = {"train": 400, "A": 50, "B": 50}  # PNGs per class of each split (the published copy)
+GIT_DATASETS = ("sfinge3d", "xia2021")  # fetched with git clone
 GIT_TIMEOUT_S = 600.0
 HTTP_TIMEOUT_S = 60.0
 
@@ -61,9 +70,12 @@ def sfinge3d_expected() -> list[str]:
             for i in range(1, SFINGE3D_INSTANCES + 1)]
 
 
+def _first_few(items: list[str]) -> str:
+    return ", ".join(items[:3]) + (f" and {len(items) - 3} more" if len(items) > 3 else "")
+
+
 def _missing_message(missing: list[str], total: int, expected: str) -> str:
-    shown = ", ".join(missing[:3]) + (f" and {len(missing) - 3} more" if len(missing) > 3 else "")
-    return f"missing {len(missing)} of {total} files ({shown}); expected {expected}"
+    return f"missing {len(missing)} of {total} files ({_first_few(missing)}); expected {expected}"
 
 
 def check_sfinge3d(root: str | Path) -> int:
@@ -94,6 +106,33 @@ def check_dhg(root: str | Path) -> int:
     return len(listed)
 
 
+def check_xia2021(root: str | Path, per_class: Mapping[str, int] = XIA2021_PER_CLASS) -> int:
+    """Raise FormatError naming the class folders that are missing or hold another number of PNGs than
+    ``per_class`` (by split of conf/manifests/xia2021.yaml) unless ``root`` is a complete copy of the
+    Xia et al. (2021) DTI images; return the number of PNGs checked."""
+    from handradar.data.measured import class_files, read_manifest  # imports torch: only when checking xia2021
+
+    root = Path(root)
+    m = read_manifest(config_dir() / XIA2021_MANIFEST, root=root)
+    wrong, folders, total = [], 0, 0
+    for split, split_folder in m.splits.items():
+        for cls in m.classes:
+            folder, file_glob, files = class_files(m, split_folder, cls)
+            rel = folder.relative_to(root).as_posix()
+            if files is None:
+                wrong.append(f"{rel}/: no such folder")
+            elif len(files) != per_class[split]:
+                wrong.append(f"{rel}/: {len(files)} {file_glob} files, expected {per_class[split]}")
+            folders, total = folders + 1, total + per_class[split]
+    if wrong:
+        layout = m.layout.replace("{split}", "{" + ",".join(m.splits.values()) + "}").replace("{class}", "<class>")
+        counts = ", ".join(f"{per_class[s]} in {f}" for s, f in m.splits.items())
+        raise FormatError(root, f"not a complete xia2021 copy: {len(wrong)} of {folders} class folders missing or "
+                                f"incomplete ({_first_few(wrong)}); expected {layout} for the {len(m.classes)} "
+                                f"classes of conf/{XIA2021_MANIFEST}, per class {counts}")
+    return total
+
+
 def _nonempty_file(path: Path) -> bool:
     return path.is_file() and path.stat().st_size > 0
 
@@ -120,7 +159,7 @@ def _place(folder: Path, out: Path) -> None:
         raise FetchError(f"{out}: cannot move the fetched copy into place: {exc.strerror}") from None
 
 
-def _already_there(out: Path, check, dataset: str) -> FetchResult | None:
+def _already_there(out: Path, check: Callable[[Path], int], dataset: str) -> FetchResult | None:
     """A FetchResult if ``out`` holds a complete copy, None if it does not exist, else FormatError."""
     if not out.exists() or (out.is_dir() and not any(out.iterdir())):
         return None  # an empty folder is replaced by the rename
@@ -134,7 +173,7 @@ def _already_there(out: Path, check, dataset: str) -> FetchResult | None:
     return FetchResult(dataset, out, "present", f"{n} files checked")
 
 
-# ---- SFINGE3D: git clone --------------------------------------------------------------------
+# ---- SFINGE3D and Xia et al.: git clone -----------------------------------------------------
 
 def _git(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     env = {**os.environ, "GIT_TERMINAL_PROMPT": "0"}  # an unknown https repository fails, never prompts
@@ -142,7 +181,7 @@ def _git(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
         return subprocess.run(["git", *args], cwd=cwd, env=env, check=False, capture_output=True, text=True,
                               timeout=GIT_TIMEOUT_S)
     except FileNotFoundError:
-        raise FetchError("git not found on PATH: install git to fetch SFINGE3D") from None
+        raise FetchError(f"git not found on PATH: install git to fetch {' or '.join(GIT_DATASETS)}") from None
     except subprocess.TimeoutExpired:
         raise FetchError(f"git {args[0]} took longer than {GIT_TIMEOUT_S:.0f} s; nothing was kept") from None
 
@@ -156,26 +195,44 @@ def _git_error(stderr: str) -> str:
     return lines[-1] if lines else "no message from git"
 
 
-def fetch_sfinge3d(out: str | Path, url: str) -> FetchResult:
-    """``git clone --depth 1 url`` into ``out``, checked (see :func:`check_sfinge3d`), placed atomically."""
+def fetch_git(dataset: str, out: str | Path, url: str, check: Callable[[Path], int], *, holds: str,
+              local_copy: str) -> FetchResult:
+    """``git clone --depth 1 url`` into ``out``, checked by ``check`` (which returns the file count),
+    placed atomically. ``holds``: what the repository must hold, for the error without a URL;
+    ``local_copy``: how to use a copy already on this machine, for the error when git fails."""
     out = Path(out).absolute()
-    present = _already_there(out, check_sfinge3d, "sfinge3d")
+    present = _already_there(out, check, dataset)
     if present is not None:
         return present
     if not url:
-        raise FetchError("sfinge3d needs fetch.url=URL (a git repository holding Dictionary/<1..13>/)")
+        raise FetchError(f"{dataset} needs fetch.url=URL (a git repository holding {holds})")
     with staging_dir(out) as tmp:
         clone = tmp / out.name
         done = _git("clone", "--depth", "1", "--quiet", "--", url, str(clone))
         if done.returncode != 0:
-            raise FetchError(f"{url}: git clone failed: {_git_error(done.stderr)}")
+            raise FetchError(f"{url}: git clone failed: {_git_error(done.stderr)}; offline? {local_copy}")
         try:
-            check_sfinge3d(clone)
+            n = check(clone)
         except FormatError as exc:  # name the repository, not the temporary clone
             raise FormatError(url, exc.problem) from None
         head = _git("rev-parse", "HEAD", cwd=clone).stdout.strip()
         _place(clone, out)
-    return FetchResult("sfinge3d", out, "fetched", f"commit {head[:12]}, {len(sfinge3d_expected())} files checked")
+    return FetchResult(dataset, out, "fetched", f"commit {head[:12]}, {n} files checked")
+
+
+def fetch_sfinge3d(out: str | Path, url: str) -> FetchResult:
+    """SFINGE3D's repository cloned into ``out``, checked (see :func:`check_sfinge3d`), placed atomically."""
+    return fetch_git("sfinge3d", out, url, check_sfinge3d, holds=f"Dictionary/<1..{len(sfinge3d.CLASSES)}>/",
+                     local_copy="clone from a copy with fetch.url=file:///PATH/DatasetV1, or read one in place with "
+                                "source.root=DIR (docs/datasets.md)")
+
+
+def fetch_xia2021(out: str | Path, url: str, *, per_class: Mapping[str, int] = XIA2021_PER_CLASS) -> FetchResult:
+    """The Xia et al. (2021) repository cloned into ``out``, checked (see :func:`check_xia2021`), placed atomically."""
+    return fetch_git("xia2021", out, url, partial(check_xia2021, per_class=per_class),
+                     holds="OpenSource/dataset/<split>/DTI/<class>/",
+                     local_copy="clone from a copy with fetch.url=file:///PATH/mm-wave-gesture-dataset, or read "
+                                "one in place with data=measured data.root=DIR (docs/datasets.md)")
 
 
 # ---- DHG-14/28: zip archive -----------------------------------------------------------------
@@ -268,6 +325,8 @@ def fetch(dataset: str, out: str | Path, url: str | None, *, txt_only: bool = Tr
     """Fetch ``dataset`` (one of :data:`DATASETS`) into ``out`` from ``url``."""
     if dataset == "sfinge3d":
         return fetch_sfinge3d(out, url or "")
+    if dataset == "xia2021":
+        return fetch_xia2021(out, url or "")
     if dataset == "dhg":
         return fetch_dhg(out, url, txt_only=txt_only, progress=progress)
     raise FetchError(f"unknown dataset {dataset!r}; expected one of {', '.join(DATASETS)}")

@@ -242,19 +242,27 @@ def _rule_split(m: Manifest, rows: list[tuple[str, int, Path]]) -> list[tuple[st
     return [(str(s), y, f) for s, (_, y, f) in zip(split, rows)]
 
 
+def class_files(m: Manifest, split_folder: str, cls: str) -> tuple[Path, str, list[Path] | None]:
+    """(folder, file glob, its files sorted by name) of class ``cls`` in ``split_folder`` under ``m.root``,
+    as ``rows.layout`` places them; files None when the folder does not exist."""
+    pattern = m.layout.replace("{split}", split_folder).replace("{class}", m.folders[cls])
+    folder_part, _, file_glob = pattern.rpartition("/")
+    folder, file_glob = m.root / folder_part, file_glob or "*"
+    if not folder.is_dir():
+        return folder, file_glob, None
+    return folder, file_glob, sorted(f for f in folder.glob(file_glob) if f.suffix.lower() in SUFFIXES and f.is_file())
+
+
 def _list_split(m: Manifest, split: str, split_folder: str) -> list[tuple[str, int, Path]]:
     """(split, label, file) of one split folder's classes, files sorted by name."""
     out = []
     for label, cls in enumerate(m.classes):
-        pattern = m.layout.replace("{split}", split_folder).replace("{class}", m.folders[cls])
-        folder_part, _, file_glob = pattern.rpartition("/")
-        folder = m.root / folder_part
-        if not folder.is_dir():
+        folder, file_glob, files = class_files(m, split_folder, cls)
+        if files is None:
             raise FormatError(folder, f"no such folder: class {cls!r} of split {split!r} (rows.layout {m.layout!r})")
-        files = sorted(f for f in folder.glob(file_glob or "*") if f.suffix.lower() in SUFFIXES and f.is_file())
         if not files:
             raise FormatError(folder, f"class {cls!r} of split {split!r} has no {'/'.join(SUFFIXES)} file "
-                                      f"matching {file_glob or '*'!r}")
+                                      f"matching {file_glob!r}")
         out += [(split, label, f) for f in files]
     return out
 
