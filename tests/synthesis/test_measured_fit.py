@@ -13,7 +13,15 @@ import yaml
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import MeasuredDataset
 from handradar.radar.chain import ChainConfig, power_to_unit
-from handradar.synthesis.measured import DEEP_FLOOR_DB, fit_unknowns, mirror_doppler, refloor, synthesize_measured
+from handradar.synthesis.measured import (
+    DEEP_FLOOR_DB,
+    add_noise_floor,
+    finish_rows,
+    fit_unknowns,
+    mirror_doppler,
+    refloor,
+    synthesize_measured,
+)
 
 CLASSES = {"push": ["push"], "pull": ["pull"], "swipe": ["swipe_right"]}
 TRUTH = {"v_max_m_s": 2.0, "frame_period_s": 0.04, "dynamic_range_db": 20.0, "approaching": "low"}
@@ -65,12 +73,44 @@ def test_fit_recovers_known_unknowns(tmp_path):
     grid = {"v_max_m_s": [0.5, 2.0, 4.0], "frame_period_s": [0.04, 0.08], "dynamic_range_db": [10.0, 20.0, 40.0],
             "approaching": ["high", "low"]}
     fit = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulate, grid, n_boot=50, seed=0)
-    assert fit.values == TRUTH
+    assert fit.values == {**TRUTH, "noise_db": None}
     assert fit.shares["approaching"]["low"] > 0.9 and fit.n_rows == 24
     # v_max 0.5 m/s needs 32 loops of 1.95 ms: no 40 ms frame holds them, so that pair is no candidate
     assert not any(c["v_max_m_s"] == 0.5 and c["frame_period_s"] == 0.04 for c in fit.candidates)
     assert len(fit.candidates) == 5 * 3 * 2
     assert fit.ranges["dynamic_range_db"][0] <= 20.0 <= fit.ranges["dynamic_range_db"][1]
+
+
+def test_noise_floor_closed_form():
+    """Exponential noise power 30 dB below a row's peak: the background's mean dB is -30 + 10 log10(e) * (-0.5772)
+    (E ln X = -Euler's gamma for X ~ Exp(1)), i.e. (60 - 32.51) / 60 on a 60 dB scale; the peak stays at 1."""
+    x = np.zeros((4, 64, 64), np.float32)
+    x[:, 10, 10] = 1.0
+    y = add_noise_floor(x, -30.0, np.random.default_rng(0))
+    background = np.delete(y.reshape(4, -1), 10 * 64 + 10, axis=1)
+    assert background.mean() == pytest.approx((60 - 30 - 10 * np.log10(np.e) * 0.5772156649) / 60, abs=0.003)
+    assert np.all(y[:, 10, 10] == 1.0)
+
+
+def test_fit_recovers_a_noise_floor(tmp_path):
+    """Rows of the stand-in's truth with noise 25 dB below the peak: the fit names that level among others."""
+    real_path = measured_stand_in(tmp_path)
+    truth = {**TRUTH, "noise_db": -25.0}
+    sim = load_arrays(synthesize_measured(real_path, {**truth, "dynamic_range_db": DEEP_FLOOR_DB, "approaching": "high",
+                                                      "noise_db": None}, per_class=8, seed=99,
+                                          cache_dir=tmp_path / "synth"))
+    measured_x = finish_rows(sim.x, truth, 5)  # the truth's rows with noise, another noise draw than the fit's
+
+    def simulate(v_max: float, frame_s: float):
+        d = load_arrays(synthesize_measured(real_path, {"v_max_m_s": v_max, "frame_period_s": frame_s,
+                                                        "dynamic_range_db": DEEP_FLOOR_DB},
+                                            per_class=8, seed=0, cache_dir=tmp_path / "synth"))
+        return d.x, d.y
+
+    grid = {"v_max_m_s": [2.0], "frame_period_s": [0.04], "dynamic_range_db": [20.0, 40.0],
+            "approaching": ["low"], "noise_db": [None, -40.0, -25.0, -10.0]}
+    fit = fit_unknowns(measured_x, sim.y, len(CLASSES), simulate, grid, n_boot=20, seed=0)
+    assert fit.values["noise_db"] == -25.0
 
 
 def test_mirror_doppler_about_the_zero_row():

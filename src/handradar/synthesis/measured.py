@@ -34,6 +34,7 @@ import numpy as np
 from handradar.atomic import atomic_path
 from handradar.data.hdf5 import read_attrs
 from handradar.data.measured import Manifest, dataset_chain, synthesis_radar
+from handradar.errors import FormatError
 from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
 from handradar.synthesis.providers import synthesize_source
@@ -60,23 +61,43 @@ def measured_manifest(real_path: str | Path) -> tuple[Manifest, tuple[int, int]]
     """The manifest a measured dataset file was built from, and its (doppler, columns) grid."""
     attrs = read_attrs(real_path)
     if attrs.get("skeletons") != "none" or "manifest" not in attrs:
-        from handradar.errors import FormatError
-
         raise FormatError(real_path, "not a measured dataset (data=measured data.manifest=FILE builds one)")
     return Manifest.from_dict(json.loads(attrs["manifest"]), Path(real_path)), (attrs["chain"].stft_len,
                                                                                 attrs["chain"].n_columns)
 
 
-def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str], *, per_class: int, seed: int,
+def add_noise_floor(x: np.ndarray, noise_db: float, rng: np.random.Generator) -> np.ndarray:
+    """Rows at a ``DEEP_FLOOR_DB`` floor with receiver noise added, at the same floor again.
+
+    Each row's power relative to its peak, ``10^((x D0 - D0) / 10)``, gains white noise of mean power
+    ``10^(noise_db / 10)`` per pixel (``noise_db`` < 0: below the noise-free peak), exponentially distributed as
+    the power of complex Gaussian noise is; the row is then rescaled to its new peak (handradar.radar.chain
+    power_to_unit)."""
+    d0 = DEEP_FLOOR_DB
+    power = 10.0 ** ((x.astype(np.float64) * d0 - d0) / 10.0) + 10.0 ** (noise_db / 10.0) * rng.exponential(size=x.shape)
+    db = 10.0 * np.log10(power)
+    top = db.max(axis=(-2, -1), keepdims=True)
+    return np.clip((db - top + d0) / d0, 0.0, 1.0).astype(np.float32)
+
+
+def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: int) -> np.ndarray:
+    """Rows simulated at a ``DEEP_FLOOR_DB`` floor, approaching high, as ``values`` says the dataset shows them: receiver
+    noise (``noise_db``, None: none), the dB floor (``dynamic_range_db``), the approaching end (``approaching``)."""
+    if values.get("noise_db") is not None:
+        x = add_noise_floor(x, float(values["noise_db"]), np.random.default_rng([int(seed), 7]))
+    if values.get("dynamic_range_db") is not None:
+        x = refloor(x, DEEP_FLOOR_DB, float(values["dynamic_range_db"]))
+    return mirror_doppler(x) if values.get("approaching", "high") == "low" else x
+
+
+def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str | None], *, per_class: int, seed: int,
                         cache_dir: str | Path, sim: Mapping | None = None) -> Path:
-    """Synthetic rows of a measured dataset's classes (cached by everything that makes them), mirrored when
-    ``values["approaching"]`` is ``low``; ``values`` holds the manifest's unknowns (``v_max_m_s``,
-    ``frame_period_s``, ``dynamic_range_db``)."""
+    """Synthetic rows of a measured dataset's classes, cached by everything that makes them. ``values`` holds the
+    manifest's unknowns: ``v_max_m_s`` and ``frame_period_s`` set the simulated radar; ``noise_db``,
+    ``dynamic_range_db`` and ``approaching`` are applied to the rows simulated at a deep floor (:func:`finish_rows`)."""
     m, shape = measured_manifest(real_path)
     radar = synthesis_radar(m, shape, values)
-    chain = dataset_chain(m, shape)
-    if values.get("dynamic_range_db") is not None:
-        chain = replace(chain, dynamic_range_db=float(values["dynamic_range_db"]))
+    chain = replace(dataset_chain(m, shape), dynamic_range_db=DEEP_FLOOR_DB)
     source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
               "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
     out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, chain, dict(sim or {}), 'measured/1')}.h5"
@@ -85,16 +106,19 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str]
                  len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3)
         synthesize_source(source, out, radar=radar, chain=chain, sim=dict(sim or {}) or None,
                           cache_dir=Path(cache_dir) / "profiles", progress=False)
-    if values.get("approaching", "high") == "low":
-        mirrored = out.with_name(out.stem + "-mirrored.h5")
-        if not mirrored.is_file():
-            with atomic_path(mirrored) as tmp:
-                shutil.copyfile(out, tmp)
-                with h5py.File(tmp, "r+") as h5:
-                    h5["spectrograms"][...] = mirror_doppler(h5["spectrograms"][()])
-                    h5.attrs["doppler"] = "mirrored"
-        out = mirrored
-    return out
+    finish = {k: values.get(k) for k in ("noise_db", "dynamic_range_db", "approaching")}
+    if finish["dynamic_range_db"] is not None and float(finish["dynamic_range_db"]) == DEEP_FLOOR_DB:
+        finish["dynamic_range_db"] = None  # the simulated floor already
+    if all(v in (None, "high") for v in finish.values()):
+        return out
+    finished = out.with_name(f"{out.stem}-{config_hash(finish, seed)}.h5")
+    if not finished.is_file():
+        with atomic_path(finished) as tmp:
+            shutil.copyfile(out, tmp)
+            with h5py.File(tmp, "r+") as h5:
+                h5["spectrograms"][...] = finish_rows(h5["spectrograms"][()], finish, seed)
+                h5.attrs["finish"] = json.dumps(finish)
+    return finished
 
 
 def class_means(x: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
@@ -141,12 +165,13 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
 
     simulate(v_max_m_s, frame_period_s) -> (x, y): synthetic rows at a floor of ``DEEP_FLOOR_DB``, approaching high;
     None where that pair is no candidate (a frame too short for its chirps).
-    grid: candidate lists for ``v_max_m_s``, ``frame_period_s``, ``dynamic_range_db`` (each <= DEEP_FLOOR_DB) and
-    ``approaching`` (``high`` / ``low``); a single-value list fixes that unknown. The bootstrap re-ranks the
+    grid: candidate lists for ``v_max_m_s``, ``frame_period_s``, ``dynamic_range_db`` (each <= DEEP_FLOOR_DB),
+    ``approaching`` (``high`` / ``low``) and optionally ``noise_db`` (None: no noise); a single-value list fixes that
+    unknown. The bootstrap re-ranks the
     ``boot_candidates`` best candidates of the full fit.
     """
-    names = ("v_max_m_s", "frame_period_s", "dynamic_range_db", "approaching")
-    missing = [k for k in names if not grid.get(k)]
+    names = ("v_max_m_s", "frame_period_s", "noise_db", "dynamic_range_db", "approaching")
+    missing = [k for k in names if not grid.get(k) and k != "noise_db"]
     if missing:
         raise ValueError(f"the fit needs candidates for {missing[0]}")
     combos, synth_means = [], []
@@ -155,13 +180,12 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
         if made is None:
             continue
         x, y = made
-        for floor in grid["dynamic_range_db"]:
-            xf = refloor(x, DEEP_FLOOR_DB, float(floor))
-            for approaching in grid["approaching"]:
-                xs = mirror_doppler(xf) if approaching == "low" else xf
-                combos.append({"v_max_m_s": float(v_max), "frame_period_s": float(frame),
-                               "dynamic_range_db": float(floor), "approaching": str(approaching)})
-                synth_means.append(class_means(xs, y, n_classes))
+        for noise, floor, approaching in itertools.product(grid.get("noise_db") or [None], grid["dynamic_range_db"],
+                                                            grid["approaching"]):
+            values = {"v_max_m_s": float(v_max), "frame_period_s": float(frame), "noise_db": noise,
+                      "dynamic_range_db": float(floor), "approaching": str(approaching)}
+            combos.append(values)
+            synth_means.append(class_means(finish_rows(x, values, seed), y, n_classes))
     if not combos:
         raise ValueError("no candidate of the grid could be simulated")
     synth_means = np.stack(synth_means)  # (combos, classes, doppler, columns)
@@ -189,7 +213,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
             key = str(combos[i][k])
             shares[k][key] = shares[k].get(key, 0.0) + 1.0 / n_boot
     ranges = {k: [float(np.percentile([combos[i][k] for i in chosen], q)) for q in (2.5, 97.5)]
-              for k in names if k != "approaching"}
+              for k in names if k != "approaching" and all(combos[i][k] is not None for i in chosen)}
     candidates = [{**c, "gap": float(g)} for c, g in zip(combos, gaps)]
     return UnknownsFit(values=dict(combos[best]), candidates=candidates, shares=shares, ranges=ranges,
                        n_rows=int(len(real_y)))

@@ -88,8 +88,10 @@ def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
             grid[k] = [given[k]]
         elif k == "approaching":  # rows of a manifest that states it are already in the project's orientation
             grid[k] = list(candidates) if m.approaching == "unknown" else ["high"]
-        else:
+        elif k in m.radar:
             grid[k] = list(candidates) if m.radar[k] == "unknown" else [m.radar[k]]
+        else:  # the receiver noise floor: no manifest field, a nuisance of the synthetic rows
+            grid[k] = list(candidates)
     if all(len(v) == 1 for v in grid.values()):
         return {k: v[0] for k, v in grid.items()}
     sim = OmegaConf.to_container(job.cfg.sim, resolve=True)
