@@ -10,8 +10,8 @@ import re
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-# a home, work or scratch folder of one machine; /path/to/... and DIR are how the docs write a path of yours
-MACHINE_PATH = re.compile(r"(?<![\w.~/-])/(?:work|home|root|tmp|Users|mnt|scratch)/[^\s`'\")\]|,]*")
+# a home, work or temporary folder of one machine; /path/to/... and DIR are how the docs write a path of yours
+MACHINE_PATH = re.compile(r"(?<![\w.~/-])/(?:work|home|root|tmp|Users)/[^\s`'\")\]|,]*")
 README_MAX_LINES = 250  # what the tool is, install, first command and own data first; the rest in docs/
 
 
