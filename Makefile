@@ -63,7 +63,8 @@ data-efficiency-figure: $(STAMP) ## the data-efficiency curve (docs/figures/data
 tables: $(STAMP) ## docs/results.md (every row with its command, commit, seeds, machine) + CSV tables from the MLflow runs
 	$(PY) -m experiments.tables $(ARGS)
 
-mlflow-ui: $(STAMP) ## the MLflow dashboard on http://127.0.0.1:5000
+mlflow-ui: $(STAMP) ## the MLflow dashboard on http://127.0.0.1:5000; first prints each experiment's link (opens it as model training)
+	@$(PY) -m handradar.runs.mlflow sqlite:///$(CURDIR)/logs/mlflow/mlflow.db http://127.0.0.1:5000
 	$(VENV)/bin/mlflow ui --backend-store-uri sqlite:///$(CURDIR)/logs/mlflow/mlflow.db --host 127.0.0.1 --port 5000
 
 world: $(STAMP) ## write reference-world recordings to data/world_recordings

@@ -11,6 +11,7 @@ convention check. A stopped run resumes: finished recordings are kept.
 
 from __future__ import annotations
 
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -37,7 +38,9 @@ def main(out: str | Path, overrides: list[str]) -> Path:
         print(f"{case.name}: {len(written)} recordings ({time.perf_counter() - t0:.0f} s)", flush=True)
         folders[case.name] = {"root": case.name, "truth": case.truth}
     manifest = out / "folders.yaml"
-    atomic_write_text(manifest, f"# python -m benchmarks.case_folders {out} {' '.join(overrides)}\n" + OmegaConf.to_yaml(
+    # the first line says how the folders were made: the benchmark's record names them by it (FolderCases.source)
+    command = shlex.join(["python", "-m", "benchmarks.case_folders", str(out), *overrides])
+    atomic_write_text(manifest, f"# {command}\n" + OmegaConf.to_yaml(
         {"also_present": always_present(worlds.world), "folders": folders}))
     return manifest
 

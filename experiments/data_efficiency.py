@@ -26,7 +26,17 @@ from omegaconf import OmegaConf
 
 from handradar.provenance import REPO_ROOT
 from handradar.vocab import GESTURES
-from handradar.runs.tables import data_setting, mean_std, stats, synthesis_setting
+from handradar.runs.tables import (
+    DEFAULT_TRACKING_URI,
+    DIRTY_MARK,
+    DIRTY_NOTE,
+    data_setting,
+    dirty,
+    load_records,
+    mean_std,
+    stats,
+    synthesis_setting,
+)
 from handradar.viz.common import pyplot, save_figure
 
 TASK = "data_efficiency"
@@ -58,11 +68,9 @@ def data_labels(records: Iterable[Mapping]) -> list[str]:
                    if r["params"].get("task_name") == TASK})
 
 
-def seed_points(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, dict[str, float]]]:
-    """{curve: {rows per gesture: {seed: accuracy}}} of the data-efficiency runs on ``data`` among
-    ``records`` (``{"params": flat config, "metrics": {...}}``, latest first: the latest run's value per
-    curve, point and seed); the paper's simulator's points, and the ceiling's (one per seed), sit at 0."""
-    out: dict[str, dict[int, dict[str, float]]] = defaultdict(lambda: defaultdict(dict))
+def _counted(records: Iterable[Mapping], data: str) -> dict[str, dict[int, dict[str, tuple[float, Mapping]]]]:
+    """{curve: {point: {seed: (accuracy, the record it comes from)}}}: :func:`seed_points` with each value's run."""
+    out: dict[str, dict[int, dict[str, tuple[float, Mapping]]]] = defaultdict(lambda: defaultdict(dict))
     for rec in records:
         p, m = rec["params"], rec["metrics"]
         if not ours(rec, data):
@@ -72,8 +80,23 @@ def seed_points(records: Iterable[Mapping], data: str = "") -> dict[str, dict[in
         for name, (metric, wants_fit) in CURVES.items():
             point = 0 if wants_fit is False or name == CEILING else k
             if metric in m and (wants_fit is None or wants_fit == fitted):
-                out[name][point].setdefault(str(p.get("seed")), float(m[metric]))
+                out[name][point].setdefault(str(p.get("seed")), (float(m[metric]), rec))
     return {name: dict(sorted(points.items())) for name, points in out.items()}
+
+
+def seed_points(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, dict[str, float]]]:
+    """{curve: {rows per gesture: {seed: accuracy}}} of the data-efficiency runs on ``data`` among
+    ``records`` (``{"params": flat config, "metrics": {...}}``, latest first: the latest run's value per
+    curve, point and seed); the paper's simulator's points, and the ceiling's (one per seed), sit at 0."""
+    return {name: {k: {seed: value for seed, (value, _) in by_seed.items()} for k, by_seed in points.items()}
+            for name, points in _counted(records, data).items()}
+
+
+def dirty_points(records: Iterable[Mapping], data: str = "") -> set[tuple[str, int]]:
+    """The (curve, point) pairs of :func:`seed_points` with a value from a working tree with uncommitted
+    changes (its record's ``provenance`` commit)."""
+    return {(name, k) for name, points in _counted(records, data).items() for k, by_seed in points.items()
+            if any(dirty(rec.get("provenance", {}).get("commit", "")) for _, rec in by_seed.values())}
 
 
 def curves(records: Iterable[Mapping], data: str = "") -> dict[str, dict[int, list[float]]]:
@@ -132,15 +155,21 @@ def rwn_minus_model(records: Iterable[Mapping], data: str = "") -> dict[int, dic
 
 
 def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int, list[str]],
-             differences: Mapping[int, Mapping[str, float]] | None = None) -> str:
+             differences: Mapping[int, Mapping[str, float]] | None = None,
+             dirty_at: Iterable[tuple[str, int]] = ()) -> str:
     """The curve's table; with ``differences`` (:func:`rwn_minus_model`), a row of them per seed and the
-    sizes where one falls below 0 by more than the larger seed spread of the two curves."""
+    sizes where one falls below 0 by more than the larger seed spread of the two curves. A value from a dirty
+    tree (``dirty_at``: :func:`dirty_points`) is marked."""
     sizes = sorted({k for name, points in data.items() if name != CEILING for k in points})
-    lines = ["| real rows per gesture | " + " | ".join(str(k) for k in sizes) + " |",
-             "|---|" + "---|" * len(sizes)]
+    marked = set(dirty_at)
+
+    def cell(name: str, k: int) -> str:
+        return mean_std(data[name][k]) + (f" {DIRTY_MARK}" if (name, k) in marked else "")
+
+    lines = ["| real rows per gesture | " + " | ".join(str(k) for k in sizes) + " |", "|---|" + "---|" * len(sizes)]
     for name in CURVES:
         if name in data and name != CEILING:
-            cells = [mean_std(data[name][k]) if k in data[name] else "–" for k in sizes]
+            cells = [cell(name, k) if k in data[name] else "–" for k in sizes]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
     if differences:
         cells = [", ".join(f"s{seed} {d:+.3f}" for seed, d in sorted(differences[k].items(), key=lambda kv: int(kv[0])))
@@ -157,10 +186,12 @@ def markdown(data: Mapping[str, Mapping[int, list[float]]], effects: Mapping[int
                   + (", ".join(harm) if harm else "no size") + "."
                   + (f" Too few seeds to judge at: {', '.join(unjudged)}." if unjudged else "")]
     if CEILING in data:
-        lines += ["", f"The {CEILING}, trained on the pool's real rows whatever k: {mean_std(data[CEILING][0])}."]
+        lines += ["", f"The {CEILING}, trained on the pool's real rows whatever k: {cell(CEILING, 0)}."]
     if effects:
         lines += ["", "| real rows per gesture | effects the fitted simulator kept |", "|---|---|"]
         lines += [f"| {k} | {'; '.join(v)} |" for k, v in effects.items()]
+    if marked:
+        lines += ["", DIRTY_NOTE]
     return "\n".join(lines) + "\n"
 
 
@@ -196,10 +227,8 @@ def plot(data: Mapping[str, Mapping[int, list[float]]], path: str | Path, *, cha
 
 
 def main(argv: list[str] | None = None) -> Path:
-    from experiments.tables import DEFAULT_URI, load_records
-
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--tracking-uri", default=DEFAULT_URI)
+    ap.add_argument("--tracking-uri", default=DEFAULT_TRACKING_URI)
     ap.add_argument("--log-dir", type=Path, default=REPO_ROOT / "logs", help="where the jobs' state folders are")
     ap.add_argument("--out", type=Path, default=REPO_ROOT / "docs" / "figures" / "data_efficiency.png")
     ap.add_argument("--data", default="", help="the runs' data, as make tables labels it (e.g. '{recordings: mine}'); "
@@ -211,7 +240,8 @@ def main(argv: list[str] | None = None) -> Path:
         others = [label or "the default world" for label in data_labels(records) if label != args.data.strip()]
         raise SystemExit(f"no finished {TASK} runs on {args.data or 'the default world'} in {args.tracking_uri}: "
                          f"run `make data-efficiency` first" + (f"; runs on other data: {others}" if others else ""))
-    print(markdown(data, fitted_effects(records, args.log_dir, args.data), rwn_minus_model(records, args.data)))
+    print(markdown(data, fitted_effects(records, args.log_dir, args.data), rwn_minus_model(records, args.data),
+                   dirty_points(records, args.data)))
     out = plot(data, args.out, chance=1.0 / len(GESTURES))
     print(out)
     return out

@@ -10,13 +10,14 @@ exponent, and is compared with step 0 on the exponents alone on the same out-of-
 SSIM of each, and the share of the gap the setting closes with its paired-bootstrap 95 % CI.
 
 The rule, fixed before any run: a setting helps a world where that CI's lower bound is above 0.
-Writes results/gap_benchmark/generic_settings/<world>_<size>.json (with command, commit, machine)
+Writes results/gap_benchmark/generic_settings/<world>_<size>.json (with command, as published, commit, machine)
 and prints a markdown table.
 """
 
 from __future__ import annotations
 
 import json
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -32,6 +33,7 @@ from handradar.gap.data import load_dataset
 from handradar.gap.job import fit_simulator
 from handradar.metrics import bootstrap_gap_closed, per_example_ssim
 from handradar.provenance import REPO_ROOT, code_version, machine
+from handradar.runs.tables import published_command
 
 # each opt-in setting with the values its documentation suggests (conf/diagnose.yaml); the records also hold
 # the two judged with them and removed, bone_extents [0, 0.5, 1] and doppler_spreads [0, 0.5, 1, 2]
@@ -127,8 +129,8 @@ def main(argv: list[str]) -> Path:
     result = judge(argv)
     overrides = dict(a.split("=", 1) for a in argv if "=" in a)
     label = f"{overrides.get('world', 'default')}_{overrides.get('benchmark.size', '240')}"
-    result.update(command="python -m experiments.generic_settings " + " ".join(argv), commit=code_version(),
-                  machine=machine())
+    result.update(command=published_command(shlex.join(["python", "-m", "experiments.generic_settings", *argv])),
+                  commit=code_version(), machine=machine())
     path = RESULTS / f"{label}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, json.dumps(result, indent=1) + "\n")

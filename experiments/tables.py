@@ -2,14 +2,15 @@
 
     python -m experiments.tables [--tracking-uri URI] [--out DIR] [--doc FILE]
 
-Reads every FINISHED run tagged by handradar (the latest one per job hash, so a re-run job counts
-once) and writes:
+Reads every FINISHED run tagged by handradar (handradar.runs.tables.load_records: the latest one per job
+hash, so a re-run job counts once) and writes:
 
 - FILE (default docs/results.md): Tables I (synthesis), II (few-shot), III (pre-training) and IV (OOD),
   each cell the mean ± standard deviation over seeds, and under each table every row's runs: the
   command that reproduces them, the commit, the seeds and the machine (the runs' ``handradar.command``
   and ``handradar.machine`` tags; for runs logged before those tags, the command from the run folder's
-  ``.hydra/overrides.yaml`` where it still exists);
+  ``.hydra/overrides.yaml`` where it still exists), as published (handradar.runs.tables.published: no path
+  of the machine that ran them; a row from a dirty tree marked);
 - into DIR (default logs/results): ``table2_few_shot.csv`` etc. with mean, std and n columns, and
   ``confusion/<preset>[_fixed]_<variant>.png``, confusion matrices summed over seeds.
 
@@ -26,62 +27,15 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from experiments.data_efficiency import curves, data_labels, fitted_effects, rwn_minus_model
+from experiments.data_efficiency import curves, data_labels, dirty_points, fitted_effects, rwn_minus_model
 from experiments.data_efficiency import markdown as curve_markdown
 from handradar.atomic import atomic_write_text
 from handradar.provenance import REPO_ROOT
 from handradar.runs.mlflow import TAG_PREFIX, Tracker, sqlite_path
-from handradar.runs.tables import build_tables, provenance, results_markdown
+from handradar.runs.tables import DEFAULT_TRACKING_URI, build_tables, load_records, results_markdown
 
-DEFAULT_URI = f"sqlite:///{REPO_ROOT / 'logs' / 'mlflow' / 'mlflow.db'}"
 log = logging.getLogger(__name__)
-
-
-def load_records(tracking_uri: str) -> list[dict]:
-    """Finished handradar runs as ``{"params", "metrics", "tags", "run_id"}``, latest per job hash, the latest
-    first."""
-    db = sqlite_path(tracking_uri)
-    if db is not None and not db.is_file():  # nothing has run yet: do not create a store
-        log.warning("no MLflow store at %s", db)
-        return []
-    tracker = Tracker(tracking_uri, "", retries=8)
-
-    def search(client) -> list:
-        exps = [e.experiment_id for e in client.search_experiments()]
-        runs, token = [], None
-        while exps:  # pages of 1000 runs
-            page = client.search_runs(exps, filter_string="attributes.status = 'FINISHED'", max_results=1000,
-                                      order_by=["attributes.start_time DESC"], page_token=token)
-            runs += list(page)
-            token = page.token
-            if not token:
-                break
-        return runs
-
-    latest: dict[str, dict] = {}
-    for run in tracker._call(search):
-        tags = run.data.tags
-        key = tags.get(f"{TAG_PREFIX}job_hash")
-        if key is None or key in latest:  # not a handradar job, or an older run of the same job
-            continue
-        params = dict(run.data.params)
-        latest[key] = {"params": params, "metrics": dict(run.data.metrics), "tags": dict(tags),
-                       "run_id": run.info.run_id, "provenance": provenance(tags, params, job_overrides(tags))}
-    return list(latest.values())
-
-
-def job_overrides(tags: dict) -> list[str] | None:
-    """The command-line overrides Hydra kept in the run folder (``.hydra/overrides.yaml``), if it still exists."""
-    path = Path(tags.get(f"{TAG_PREFIX}run_dir", "")) / ".hydra" / "overrides.yaml"
-    if not tags.get(f"{TAG_PREFIX}run_dir") or not path.is_file():
-        return None
-    try:
-        got = yaml.safe_load(path.read_text())
-    except yaml.YAMLError:
-        return None  # an unreadable folder only costs the row its exact command
-    return [str(o) for o in got] if isinstance(got, list) else None
 
 
 def confusion_group(rec: dict) -> str:
@@ -120,7 +74,7 @@ def write_confusions(tracking_uri: str, records: list[dict], out: Path) -> list[
 
 def main(argv: list[str] | None = None) -> Path:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--tracking-uri", default=DEFAULT_URI, help=f"MLflow store (default {DEFAULT_URI})")
+    ap.add_argument("--tracking-uri", default=DEFAULT_TRACKING_URI, help=f"MLflow store (default {DEFAULT_TRACKING_URI})")
     ap.add_argument("--out", type=Path, default=REPO_ROOT / "logs" / "results", help="output folder")
     ap.add_argument("--doc", type=Path, default=REPO_ROOT / "docs" / "results.md", help="the results markdown")
     ap.add_argument("--no-figures", action="store_true", help="skip the confusion-matrix PNGs")
@@ -145,7 +99,8 @@ def main(argv: list[str] | None = None) -> Path:
                "simulator each job fitted on its k rows per gesture, with the fit's held-out SSIM before and after "
                "its effects: where that stays flat as k grows, the simulator's residual gap, not the real rows, "
                "limits synthetic-only training.\n\n"
-               + curve_markdown(curve, fitted_effects(records, args.log_dir, label), rwn_minus_model(records, label)))
+               + curve_markdown(curve, fitted_effects(records, args.log_dir, label), rwn_minus_model(records, label),
+                                dirty_points(records, label)))
     atomic_write_text(args.doc, md)
     if not args.no_figures:
         write_confusions(args.tracking_uri, records, args.out)

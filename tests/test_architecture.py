@@ -1,4 +1,5 @@
-"""The layering of docs/architecture.md holds: imports point down, no rings, local imports explained.
+"""The layering of docs/architecture.md holds: imports point down, no rings, local imports explained; the
+scripts of experiments/ and benchmarks/ import each other in no ring either.
 
 The layer table and the list of modules allowed function-local imports are read from the document
 itself, so the document and this test cannot drift apart.
@@ -48,16 +49,18 @@ def local_import_modules() -> set[str]:
     return {re.findall(r"`([a-z_.]+)`", cells[0])[0] for cells in _table("local-imports")}
 
 
-def module_name(path: Path) -> str:
-    parts = path.relative_to(SRC.parent).with_suffix("").parts
+def module_name(path: Path, base: Path = SRC.parent) -> str:
+    parts = path.relative_to(base).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def imports(path: Path, me: str | None = None) -> list[tuple[str, bool, int]]:
-    """(imported handradar module, inside a function?, line) of every import in the file of module ``me``."""
+def imports(path: Path, me: str | None = None, base: Path = SRC.parent,
+            roots: tuple[str, ...] = ("handradar",)) -> list[tuple[str, bool, int]]:
+    """(imported module of the packages ``roots`` under ``base``, inside a function?, line) of every import in
+    the file of module ``me``."""
     tree = ast.parse(path.read_text())
     parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
-    me = me or module_name(path)
+    me = me or module_name(path, base)
     out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom):
@@ -68,8 +71,8 @@ def imports(path: Path, me: str | None = None) -> list[tuple[str, bool, int]]:
             else:
                 names = [node.module or ""]
             # `from handradar.x import y` may import the submodule handradar.x.y
-            names = [f"{names[0]}.{a.name}" if (SRC.parent / f"{names[0]}.{a.name}".replace(".", "/")).with_suffix(".py").is_file()
-                     or (SRC.parent / f"{names[0]}.{a.name}".replace(".", "/")).is_dir() else names[0]
+            names = [f"{names[0]}.{a.name}" if (base / f"{names[0]}.{a.name}".replace(".", "/")).with_suffix(".py").is_file()
+                     or (base / f"{names[0]}.{a.name}".replace(".", "/")).is_dir() else names[0]
                      for a in node.names]
         elif isinstance(node, ast.Import):
             names = [a.name for a in node.names]
@@ -81,11 +84,51 @@ def imports(path: Path, me: str | None = None) -> list[tuple[str, bool, int]]:
             if isinstance(p, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 local = True
                 break
-        out += [(n, local, node.lineno) for n in names if n == "handradar" or n.startswith("handradar.")]
+        out += [(n, local, node.lineno) for n in names if n in roots or n.startswith(tuple(f"{r}." for r in roots))]
     return out
 
 
 MODULES = {module_name(p): p for p in sorted(SRC.rglob("*.py"))}
+SCRIPT_PACKAGES = ("experiments", "benchmarks")  # python -m experiments.tables etc., from the repository root
+SCRIPTS = {module_name(p, REPO): p for d in SCRIPT_PACKAGES for p in sorted((REPO / d).rglob("*.py"))}
+
+
+def import_graph(modules: dict[str, Path], base: Path = SRC.parent,
+                 roots: tuple[str, ...] = ("handradar",)) -> dict[str, set[str]]:
+    """{module: the modules it imports, at the top or inside a function}; a package's ``__init__`` importing a
+    sibling package's ``__init__`` is not an edge."""
+    graph: dict[str, set[str]] = defaultdict(set)
+    for m, p in modules.items():
+        for t, _, _ in imports(p, m, base, roots):
+            target = t
+            while target not in modules and "." in target:  # `handradar.x.Name` -> module handradar.x
+                target = target.rsplit(".", 1)[0]
+            if target in modules and target != m and not modules[m].name == "__init__.py" == modules[target].name:
+                graph[m].add(target)
+    return graph
+
+
+def ring(graph: dict[str, set[str]]) -> list[str] | None:
+    """An import ring of ``graph`` (its modules in order, the first repeated at the end), or None."""
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    stack: list[str] = []
+
+    def visit(n: str) -> list[str] | None:
+        state[n] = 1
+        stack.append(n)
+        for nxt in sorted(graph.get(n, ())):
+            if state.get(nxt) == 1:
+                return stack[stack.index(nxt):] + [nxt]
+            if nxt not in state and (found := visit(nxt)):
+                return found
+        stack.pop()
+        state[n] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (found := visit(node)):
+            return found
+    return None
 
 
 def top(module: str) -> str:
@@ -123,36 +166,29 @@ def test_function_local_imports_are_explained():
 
 
 def test_no_import_rings():
-    graph: dict[str, set[str]] = defaultdict(set)
-    for m, p in MODULES.items():
-        for t, _, _ in imports(p):
-            target = t
-            while target not in MODULES and "." in target:  # `handradar.x.Name` -> module handradar.x
-                target = target.rsplit(".", 1)[0]
-            if target in MODULES and target != m and not MODULES[m].name == "__init__.py" == MODULES[target].name:
-                graph[m].add(target)
+    graph = import_graph(MODULES)
     # package-level: a ring between packages breaks the layering even if modules do not form one
     packages: dict[str, set[str]] = defaultdict(set)
     for a, targets in graph.items():
         packages[top(a)] |= {top(b) for b in targets if top(b) != top(a)}
     for g in (graph, packages):
-        state: dict[str, int] = {}
-        stack: list[str] = []
+        found = ring(g)
+        assert found is None, f"import ring: {' -> '.join(found)}"
 
-        def visit(n: str, g=g, state=state, stack=stack) -> None:
-            state[n] = 1
-            stack.append(n)
-            for nxt in sorted(g.get(n, ())):
-                if state.get(nxt) == 1:
-                    raise AssertionError(f"import ring: {' -> '.join(stack[stack.index(nxt):] + [nxt])}")
-                if nxt not in state:
-                    visit(nxt)
-            stack.pop()
-            state[n] = 2
 
-        for node in sorted(g):
-            if node not in state:
-                visit(node)
+def test_no_import_rings_among_experiments_and_benchmarks():
+    assert {"experiments.tables", "experiments.data_efficiency", "benchmarks.common"} <= set(SCRIPTS)
+    found = ring(import_graph(SCRIPTS, REPO, SCRIPT_PACKAGES))
+    assert found is None, f"import ring: {' -> '.join(found)}"
+
+
+def test_the_ring_check_sees_a_function_level_ring(tmp_path: Path):
+    """Not vacuous: two scripts importing each other, one of them inside a function, form a ring."""
+    (tmp_path / "experiments").mkdir()
+    (tmp_path / "experiments" / "a.py").write_text("from experiments.b import g\n")
+    (tmp_path / "experiments" / "b.py").write_text("def g():\n    from experiments.a import f\n")
+    probes = {module_name(p, tmp_path): p for p in sorted((tmp_path / "experiments").glob("*.py"))}
+    assert ring(import_graph(probes, tmp_path, SCRIPT_PACKAGES)) == ["experiments.a", "experiments.b", "experiments.a"]
 
 
 def test_the_checker_sees_an_upward_import(tmp_path: Path):

@@ -1,4 +1,4 @@
-"""Provenance: code version and config hashes that key caches and tag outputs."""
+"""Provenance: code version and config hashes that key caches and tag outputs; the command that wrote a data folder."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from handradar import __version__
+from handradar.atomic import atomic_write_text
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -96,3 +97,20 @@ def machine() -> str:
     except Exception:  # a broken CUDA install must not stop a job from being recorded
         pass
     return f"{platform.machine() or 'unknown'}, {os.cpu_count() or '?'} CPUs, {gpu}"
+
+
+SOURCE_FILE = "source.txt"  # in a data folder: the command that wrote it (docs/architecture.md, "Recording format")
+
+
+def write_source(folder: str | Path, command: str) -> None:
+    """Record in ``folder`` the command that wrote it, so that a published result names its data by how to
+    make them, not by where they lie (handradar.runs.tables.published)."""
+    atomic_write_text(Path(folder) / SOURCE_FILE, command.strip() + "\n")
+
+
+def read_source(folder: str | Path) -> str | None:
+    """The command that wrote ``folder`` (:func:`write_source`); None where it was not recorded."""
+    path = Path(folder).expanduser() / SOURCE_FILE
+    if not path.is_file():
+        return None
+    return path.read_text(encoding="utf-8").strip() or None

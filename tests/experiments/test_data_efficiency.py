@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.data_efficiency import curves, fitted_effects, markdown, plot, rwn_minus_model
+from experiments.data_efficiency import curves, dirty_points, fitted_effects, markdown, plot, rwn_minus_model
+from handradar.runs.tables import DIRTY_NOTE
 from handradar.data.splits import few_shot_split
 from tests.tasks.fakes import compose_train
 
@@ -73,7 +74,21 @@ def test_markdown_and_figure(tmp_path: Path):
     assert "| radar only | – | 0.250 ± 0.071 (n=2) | 0.400 |" in md
     assert "| synthetic only (paper's simulator) | 0.400 ± 0.071 (n=2) | – | – |" in md
     assert "The real pool (ceiling), trained on the pool's real rows whatever k: 0.700 ± 0.000 (n=2)." in md
+    assert DIRTY_NOTE not in md
     assert plot(data, tmp_path / "f.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_value_from_a_dirty_tree_is_marked():
+    """The run that counts for a point and seed decides: a dirty run's values are marked, an older dirty run
+    that a newer one replaced marks nothing."""
+    dirty = {**rec(4, 3, "effects", radar_only=0.5, radar_pool=0.7), "provenance": {"commit": "abc1234.dirty"}}
+    replaced = {**rec(1, 1, "effects", radar_only=0.9), "provenance": {"commit": "abc1234.dirty"}}
+    records = [*RECORDS[:-1], dirty, replaced]
+    assert dirty_points(records) == {("radar only", 4), ("real pool (ceiling)", 0)}
+    md = markdown(curves(records), {}, dirty_at=dirty_points(records))
+    assert "| radar only | – | 0.250 ± 0.071 (n=2) | 0.450 ± 0.071 (n=2) † |" in md
+    assert "| + synthetic (fitted simulator) | – | 0.550 ± 0.071 (n=2) | 0.700 |" in md
+    assert "whatever k: 0.700 ± 0.000 (n=3) †." in md and md.rstrip().endswith(DIRTY_NOTE)
 
 
 def test_per_class_split_is_nested_and_exact():

@@ -1,4 +1,5 @@
-"""Paper-style tables from MLflow runs (experiments/tables.py) and from one job (report.job_table)."""
+"""Paper-style tables from MLflow runs (experiments/tables.py) and from one job (report.job_table); what a
+published row says about where its figures come from."""
 
 from __future__ import annotations
 
@@ -13,7 +14,18 @@ import pytest
 
 from experiments import tables
 from handradar.runs.mlflow import Tracker
-from handradar.runs.tables import build_tables, group_runs, job_table, mean_std, provenance, results_markdown, stats
+from handradar.runs.tables import (
+    DIRTY_NOTE,
+    build_tables,
+    group_runs,
+    job_overrides,
+    job_table,
+    mean_std,
+    provenance,
+    published_command,
+    results_markdown,
+    stats,
+)
 
 
 def test_stats_and_cells():
@@ -187,6 +199,50 @@ def test_results_markdown_names_command_commit_seeds_and_machine_of_every_row():
 def test_command_of_an_old_run_comes_from_its_run_folder(tmp_path: Path):
     (tmp_path / ".hydra").mkdir()
     (tmp_path / ".hydra" / "overrides.yaml").write_text("- +experiment=ood_hands\n- seed=2\n")
-    assert tables.job_overrides({"handradar.run_dir": str(tmp_path)}) == ["+experiment=ood_hands", "seed=2"]
-    assert tables.job_overrides({"handradar.run_dir": str(tmp_path / "gone")}) is None
-    assert tables.job_overrides({}) is None
+    assert job_overrides({"handradar.run_dir": str(tmp_path)}) == ["+experiment=ood_hands", "seed=2"]
+    assert job_overrides({"handradar.run_dir": str(tmp_path / "gone")}) is None
+    assert job_overrides({}) is None
+
+
+def test_a_published_row_names_its_data_by_how_to_make_them_never_by_a_path():
+    """A command's data folder on the machine that ran it reads DIR, said how to make by the command that
+    wrote it (the run's handradar.data_source tag); where outputs and caches went is left out."""
+    heldout = {**_few(0.05, "fixed"), "data.dataset._target_": "handradar.data.datasets.RecordingsFolder",
+               "data.dataset.root": "/work/recs/heldout"}
+    mine = {**heldout, "data.dataset.root": "/home/me/captures"}
+    cmd = ("python train.py +experiment=few_shot_5pct data=recordings data.root={} paths.log_dir=/work/main/logs "
+           "'hydra.run.dir=/tmp/x y' seed={}")
+    written = "handradar-world world=heldout out=DIR"
+    records = [{"params": heldout, "metrics": {"test/acc_radar_only": 0.5 + s / 10},
+                "provenance": provenance(_tags(s, **{"handradar.command": cmd.format("/work/recs/heldout", s),
+                                                     "handradar.data_source": written}), heldout)} for s in (1, 2)]
+    records.append({"params": mine, "metrics": {"test/acc_radar_only": 0.3},
+                    "provenance": provenance(_tags(1, **{"handradar.command": cmd.format("/home/me/captures", 1)}),
+                                             mine)})
+    md = results_markdown(build_tables(records), "x")
+    assert "/work/" not in md and "/home/" not in md and "/tmp/" not in md
+    lines = md.splitlines()
+    assert ("- 5 %* {recordings: heldout}: `python train.py -m +experiment=few_shot_5pct data=recordings data.root=DIR "
+            "seed=1,2` (DIR: written by `handradar-world world=heldout out=DIR`) at `2381649`, seeds 1, 2, "
+            "machine not recorded") in lines
+    assert ("- 5 %* {recordings: captures}: `python train.py +experiment=few_shot_5pct data=recordings data.root=DIR "
+            "seed=1` (DIR: its source not recorded) at `2381649`, seed 1, machine not recorded") in lines
+    # a file keeps its name; a relative path (the repository's own) and the rest of the command stay as they are
+    assert (published_command("python -m benchmarks.case_folders /work/recs/s36 'benchmark.folders=/w/m/folders.yaml' "
+                              "out=data/world '+benchmark.world={subjects: 1}'")
+            == "python -m benchmarks.case_folders DIR benchmark.folders=DIR/folders.yaml out=data/world "
+               "'+benchmark.world={subjects: 1}'")
+
+
+def test_a_row_from_a_dirty_tree_is_marked_in_the_table():
+    records = [{"params": _few(0.05), "metrics": {"test/acc_radar_only": 0.4},
+                "provenance": provenance(_tags(1, "2381649e5089.dirty"), {})},
+               {"params": _few(0.05), "metrics": {"test/acc_radar_only": 0.6},
+                "provenance": provenance(_tags(2), {})},
+               {"params": _few(0.2), "metrics": {"test/acc_radar_only": 0.8}, "provenance": provenance(_tags(1), {})}]
+    (few,) = build_tables(records)
+    lines = few.markdown().splitlines()
+    assert "| 5 % † | 0.500 ± 0.141 (n=2) | – | – | – | – | – | – |" in lines
+    assert "| 20 % | 0.800 | – | – | – | – | – | – |" in lines
+    assert lines[-1] == DIRTY_NOTE and "`2381649.dirty`" in results_markdown([few], "x")
+    assert DIRTY_NOTE not in build_tables(records[1:])[0].markdown()  # a clean table carries no note

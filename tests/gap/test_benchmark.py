@@ -412,6 +412,7 @@ def test_folders_with_known_answers_are_ingested_diagnosed_judged_and_resumed(tm
     record = validate_record(json.loads(run_benchmark(cfg, tmp_path / "run").read_text()), "record")
     by = {c["case"]: c for c in record["cases"]}
     assert record["world"] == "folders-held_back" and record["world_version"] == "recordings" and record["size"] == 8
+    assert "data_source" not in record  # a hand-written manifest does not say how its folders were made
     assert (tmp_path / "results" / "folders-held_back_8.json").is_file()
     assert by["palm_case"]["cause"] == by["noise_case"]["cause"] == "palm"
     assert found(by["palm_case"]) and not wrong_cause(by["palm_case"]) and wrong_cause(by["noise_case"])
@@ -440,6 +441,9 @@ def test_case_folders_writes_the_benchmarks_case_worlds_and_a_manifest_the_folde
         "+benchmark.world={subjects: 1, repetitions: 1, gestures: [grasp], angles_deg: [0.0]}"])
     folders = FolderCases.load(manifest)
     assert {c.name: c.truth for c in folders.cases} == {"palm": "palm", "nothing": "none"} and folders.present == []
+    # the record names the folders by the command that wrote them, without this machine's paths
+    assert folders.source == ("python -m benchmarks.case_folders DIR benchmark.size=null 'benchmark.cases=[palm,nothing]' "
+                              "'+benchmark.world={subjects: 1, repetitions: 1, gestures: [grasp], angles_deg: [0.0]}'")
     for case, on in (("palm", {"palm"}), ("nothing", set())):
         metas = [json.loads(p.read_text()) for p in (tmp_path / "cases" / case).glob("*/meta.json")]
         assert len(metas) == 1 and metas[0]["gesture"] == "grasp"

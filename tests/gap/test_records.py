@@ -17,11 +17,12 @@ from handradar.gap.records import (
     validate_record,
 )
 from handradar.provenance import commit_of
+from handradar.runs.tables import DIRTY_NOTE, dirty, published_command
 
 REPO = Path(__file__).resolve().parents[2]
 
 
-def _record(world: str, size: int, palm_cause: str = "palm", **extra) -> dict:
+def _record(world: str, size: int, palm_cause: str = "palm", version: str = "0.1.0+gabc123def456", **extra) -> dict:
     results = [{"case": "palm", "truth": "palm", "cause": palm_cause, "correct": palm_cause == "palm",
                 "true_gap_closed": 0.125, "true_ci95": [0.1, 0.15], "true_rank": 1, "top_candidate": "palm",
                 "top_gap_closed": 0.125, "recordings_needed": 620 if palm_cause == "inconclusive" else None, "rows": size},
@@ -29,14 +30,14 @@ def _record(world: str, size: int, palm_cause: str = "palm", **extra) -> dict:
     scores = {"effects_correct": int(palm_cause == "palm"), "effects_total": 1, "controls_correct": 1, "controls_total": 1,
               "effects_inconclusive": int(palm_cause == "inconclusive"), "controls_inconclusive": 0,
               "mean_true_gap_closed": 0.125, "mean_after_gap_closed": 0.1}
-    settings = {"code_version": "0.1.0+gabc123def456.dirty", "seed": 3, "minutes": 12.34, "threads": 2, "rows": size}
+    settings = {"code_version": version, "seed": 3, "minutes": 12.34, "threads": 2, "rows": size}
     rec = benchmark_record(results, scores, settings, world=world, size=size, world_version="world/3",
                            machine="x86_64, 2 CPUs, no GPU", command=f"python diagnose.py world={world}")
     return {**rec, **extra}
 
 
 def test_record_keeps_provenance_and_each_verdict():
-    r = _record("heldout", 36, "inconclusive")
+    r = _record("heldout", 36, "inconclusive", "0.1.0+gabc123def456.dirty")
     assert validate_record(r, "x") is r and record_name(r) == "heldout_36.json"
     assert (r["commit"], r["seeds"], r["wall_min"], r["world_version"]) == ("abc123d.dirty", [3], 12.3, "world/3")
     assert r["cases"][0]["cause"] == "inconclusive" and r["cases"][0]["recordings_needed"] == 620
@@ -63,9 +64,39 @@ def test_summary_table_one_column_per_run_legend_once():
     assert "| **effects found** | 1 of 1 | 1 of 1 | 1 of 1 | 0 of 1 |" in lines
     assert "| **wrong causes** | **0** | **0** | **0** | **1** |" in lines
     assert md.count("(✓): found but undecided") == 1  # the legend, written once
-    assert "`python diagnose.py world=heldout` at `abc123d.dirty` (world/3), seed 3, x86_64, 2 CPUs, no GPU" in md
+    assert "`python diagnose.py world=heldout` at `abc123d` (world/3), seed 3, x86_64, 2 CPUs, no GPU" in md
+    assert DIRTY_NOTE not in md
     assert "one split" not in md  # settings tried stay in the records (docs/gap_validation.md lists them)
     assert "(no records in somewhere)" in summary_markdown([], "somewhere")
+
+
+def test_the_summary_names_no_path_and_marks_a_dirty_run():
+    """A record's folders read DIR, said how to make by the command that wrote them (their manifest's first
+    line); where outputs and caches went is left out; a run from a dirty tree is marked in the table."""
+    folders = _record("folders-s36", 36, command="python diagnose.py +experiment=gap_benchmark "
+                      "benchmark.folders=/work/recs/s36/folders.yaml paths.log_dir=/work/main/logs threads=2",
+                      data_source="python -m benchmarks.case_folders /work/recs/s36 world=scatterers benchmark.size=36")
+    md = summary_markdown([_record("default", 240, version="0.1.0+gabc123def456.dirty"), folders])
+    assert "/work/" not in md
+    assert "| case (truth) | default 240 † | folders-s36 36 |" in md.splitlines() and DIRTY_NOTE in md
+    assert ("- **folders-s36 36**: `python diagnose.py +experiment=gap_benchmark benchmark.folders=DIR/folders.yaml "
+            "threads=2` (DIR: written by `python -m benchmarks.case_folders DIR world=scatterers benchmark.size=36`) "
+            "at `abc123d` (world/3)") in md
+    # the benchmark writes the folders' source into the record it publishes
+    settings = {"code_version": "0.1.0+gabc123def456", "data_source": folders["data_source"]}
+    assert benchmark_record([], folders["scores"], settings, world="folders-s36", size=36, world_version="recordings",
+                            machine="m", command="c")["data_source"] == folders["data_source"]
+
+
+def test_no_published_record_names_a_path_or_is_from_a_dirty_tree():
+    """The kept records: commands as published (handradar.runs.tables.published_command leaves them as they are),
+    no run from a working tree with uncommitted changes."""
+    for path in sorted((REPO / "results" / "gap_benchmark").rglob("*.json")):
+        obj = json.loads(path.read_text())
+        for record in [obj, *obj.get("variants", [])]:
+            if "command" in record:
+                assert published_command(record["command"]) == record["command"], path
+        assert not dirty(obj.get("commit", "")), path
 
 
 def test_load_records_orders_runs_and_names_a_bad_file(tmp_path: Path):

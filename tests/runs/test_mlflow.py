@@ -13,10 +13,11 @@ from handradar.runs.mlflow import (
     MODEL_TRAINING,
     DataRef,
     Tracker,
+    dashboard_links,
     sqlite_path,
     tracked_run,
 )
-from handradar.provenance import machine
+from handradar.provenance import machine, write_source
 from handradar.training import TrackerLogger
 
 
@@ -135,3 +136,29 @@ def test_a_reviewer_tells_runs_apart_in_the_dashboard(tmp_path: Path):
     assert EXPERIMENT_KIND_TAG not in client.get_experiment_by_name("diagnose").tags
     Tracker(uri, "diagnose").start(run_name="again")
     assert client.get_experiment_by_name("diagnose").tags[EXPERIMENT_KIND_TAG] == MODEL_TRAINING
+
+
+def test_a_run_on_a_folder_that_says_how_it_was_made_is_tagged_with_it(tmp_path: Path):
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    folder = tmp_path / "heldout"
+    folder.mkdir()
+    write_source(folder, "handradar-world world=heldout out=DIR")
+    ref = DataRef.of({"root": str(folder)}, tmp_path / "recordings-ab.h5", "ab")
+    assert (ref.name, ref.source) == ("heldout", "handradar-world world=heldout out=DIR")
+    with tracked_run(Tracker(uri, "train"), run_name="r", tags={}, dataset=ref) as rid:
+        pass
+    assert _client(uri).get_run(rid).data.tags["handradar.data_source"] == "handradar-world world=heldout out=DIR"
+    assert DataRef.of({"root": str(tmp_path / "mine")}, tmp_path / "x.h5", "cd").source is None  # not recorded
+
+
+def test_dashboard_links_open_every_experiment_as_model_training(tmp_path: Path):
+    """MLflow 3.17's UI ignores the experiment's kind tag for a switch kept in the browser (GenAI unless a link
+    says otherwise): make mlflow-ui prints links that open each experiment as model training."""
+    uri = f"sqlite:///{tmp_path}/mlflow.db"
+    assert dashboard_links(uri, "http://127.0.0.1:5000") == {} and not (tmp_path / "mlflow.db").exists()
+    for name in ("train", "diagnose"):
+        Tracker(uri, name).start(run_name="r")
+    ids = {e.name: e.experiment_id for e in _client(uri).search_experiments()}
+    assert dashboard_links(uri, "http://127.0.0.1:5000/") == {
+        name: f"http://127.0.0.1:5000/#/experiments/{ids[name]}?workflowType=machine_learning"
+        for name in ("diagnose", "train")}

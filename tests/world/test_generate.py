@@ -18,6 +18,7 @@ from torchmetrics.functional.image import structural_similarity_index_measure as
 from handradar.data import hdf5
 from handradar.data.ingest import ingest
 from handradar.data.recording import load_recording
+from handradar.provenance import read_source
 from handradar.radar.chain import column_times_s, velocity_axis_m_s
 from handradar.world import generate
 from handradar.world.generate import (
@@ -202,13 +203,16 @@ def test_two_pool_workers_give_the_same_dataset_fast(world, radar, short_chain, 
 def test_command_line_writes_recordings_and_prints_the_folder(tmp_path):
     out = tmp_path / "world"
     env = dict(os.environ, PYTHONPATH=str(REPO / "src"))
-    cmd = [sys.executable, "-m", "handradar.cli.world", f"out={out}", "world.gestures=[hand_merge]",
+    cmd = [str(Path(sys.executable).parent / "handradar-world"), f"out={out}", "world.gestures=[hand_merge]",
            "world.subjects=1", "world.angles_deg=[-30]", "world.repetitions=2", "world.capture_frames=3",
            "world.workers=1", "limit=1", f"hydra.run.dir={tmp_path / 'run'}"]
     done = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == str(out)
-    folders = sorted(p.name for p in out.iterdir())
+    folders = sorted(p.name for p in out.iterdir() if p.is_dir())
     assert folders == ["hand_merge_s01_a-30_r0"]
     rec = load_recording(out / folders[0])
     assert rec.n_frames == 3 and rec.meta.hands == 2 and rec.meta.angle_deg == -30
+    # the folder says how it was made (a published result names it so), not where it or the run's log lie
+    assert read_source(out) == ("handradar-world 'world.gestures=[hand_merge]' world.subjects=1 'world.angles_deg=[-30]' "
+                                "world.repetitions=2 world.capture_frames=3 world.workers=1 limit=1 out=DIR")

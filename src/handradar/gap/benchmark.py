@@ -83,7 +83,7 @@ from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 from handradar.runs.hydra import command_line, group_choice, output_dir
 from handradar.runs.mlflow import Tracker, tracked_run
-from handradar.runs.tables import fmt_number
+from handradar.runs.tables import fmt_number, published_command
 from handradar.sim.factory import SimFactory
 from handradar.viz.gap import confusion_figure
 from handradar.vocab import EFFECTS
@@ -244,6 +244,7 @@ class FolderCases:
     cases: list[Case]  # a folder's name and truth
     roots: dict[str, Path]  # by case name
     present: list[str]
+    source: str | None = None  # the command that wrote the folders (the manifest's first line, "# <command>"), published
 
     @classmethod
     def load(cls, manifest: str | Path) -> FolderCases:
@@ -267,7 +268,8 @@ class FolderCases:
         unknown = [e for e in present if e not in EFFECTS]
         if unknown:
             raise FormatError(path, f"also_present: {', '.join(map(str, unknown))} not in {', '.join(EFFECTS)}")
-        return cls(path, listed, roots, present)
+        first = path.read_text(encoding="utf-8").partition("\n")[0]
+        return cls(path, listed, roots, present, published_command(first[2:]) if first.startswith("# ") else None)
 
     @property
     def label(self) -> str:
@@ -604,15 +606,16 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
         settings = {"rows": n_rows, "split": split_text(diag_cfg, results[0]["folds"] if results else 1),
                     "fit_rows": diag_cfg.get("fit_rows") or "all", "seed": diag_cfg.get("seed", 0),
                     "minutes": sum(r["seconds"] for r in results) / 60.0, "threads": torch.get_num_threads(),
-                    "code_version": code_version(), "command": command_line("diagnose.py", OUTPUT_KEYS),
-                    **({"manifest": str(folders.manifest)} if folders else {})}
+                    "code_version": code_version(),
+                    "command": published_command(command_line("diagnose.py") or DEFAULT_COMMAND, OUTPUT_KEYS),
+                    **({"manifest": str(folders.manifest), "data_source": folders.source} if folders else {})}
         md_path = out / "gap_benchmark.md"
         atomic_write_text(md_path, results_markdown(results, scores, FIGURE, settings) + "\n")
         atomic_write_text(out / "benchmark.json", json.dumps({"results": results, "scores": scores,
                                                               "settings": settings}, indent=1) + "\n")
         record = benchmark_record(results, scores, settings, world=world_name, size=size,
                                   world_version="recordings" if folders else WORLD_VERSION,
-                                  machine=machine(), command=settings["command"] or DEFAULT_COMMAND)
+                                  machine=machine(), command=settings["command"])
         rec_path = out / "record.json"
         for path in (rec_path, *([Path(bench.record_dir) / record_name(record)] if bench.get("record_dir") else [])):
             atomic_write_text(path, json.dumps(record, indent=1) + "\n")

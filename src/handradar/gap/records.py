@@ -2,8 +2,10 @@
 
 A record (``handradar.gap_benchmark/1``, one JSON file per run, results/gap_benchmark/<world>_<size>.json)
 keeps what a published figure needs and where it came from: the world (config group choice) and its
-generator version, the size (recordings per case), the command, commit, seeds and machine, the scores
-and each case's verdict with the true effect's gap_closed. ``variants`` (optional) lists settings tried
+generator version, the size (recordings per case), the command (as published: no path of the machine
+that ran it, handradar.runs.tables.published_command), commit, seeds and machine, the scores and each
+case's verdict with the true effect's gap_closed. ``data_source`` (folders of recordings only): the
+command that wrote them, from their manifest's first line. ``variants`` (optional) lists settings tried
 on the same world and size and judged, each with its command, commit and headline figures.
 
 Public API:
@@ -26,7 +28,7 @@ from typing import Any
 from handradar.errors import FormatError
 from handradar.gap.report import VERDICTS
 from handradar.provenance import commit_of
-from handradar.runs.tables import fmt_number
+from handradar.runs.tables import DIRTY_MARK, DIRTY_NOTE, dirty, fmt_number, published
 
 FORMAT = "handradar.gap_benchmark/1"
 WORLD_ORDER = ("default", "heldout", "heldout2", "heldout3")  # the tuning world first, then the test side
@@ -83,6 +85,7 @@ def benchmark_record(results: Sequence[Mapping], scores: Mapping, settings: Mapp
             "seeds": [int(settings.get("seed", 0))], "machine": machine, "threads": settings.get("threads"),
             "wall_min": round(float(settings.get("minutes", 0.0)), 1), "rows": settings.get("rows"),
             "split": settings.get("split"),
+            **({"data_source": settings["data_source"]} if settings.get("data_source") else {}),
             "scores": {k: scores.get(k) for k in SCORE_KEYS},
             "cases": [{k: r.get(k) for k in CASE_KEYS} for r in results]}
 
@@ -156,7 +159,7 @@ def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benc
     (the settings tried on a run stay in its record's ``variants``; docs/gap_validation.md lists them)."""
     if not records:
         return f"# Gap benchmark\n\n(no records in {source})\n"
-    heads = [f"{r['world']} {r['size']}" for r in records]
+    heads = [f"{r['world']} {r['size']}" + (f" {DIRTY_MARK}" if dirty(r["commit"]) else "") for r in records]
     cases: list[tuple[str, str]] = []
     for r in records:
         for c in r["cases"]:
@@ -180,11 +183,13 @@ def summary_markdown(records: Sequence[Mapping], source: str = "results/gap_benc
                                                           for x in s) + " |")
     lines.append("| world version | " + " | ".join(r["world_version"] for r in records) + " |")
     lines.append("| commit | " + " | ".join(f"`{r['commit']}`" for r in records) + " |")
+    lines += ["", DIRTY_NOTE] if any(dirty(r["commit"]) for r in records) else []
     lines += ["", "## Provenance", ""]
     for h, r in zip(heads, records):
         seeds = ", ".join(map(str, r["seeds"]))
         wall = "" if r.get("wall_min") is None else f", {r['wall_min']} min on {r.get('threads') or '?'} thread(s)"
         split = f", {r['split']}" if r.get("split") else ""
-        lines.append(f"- **{h}**: `{r['command']}` at `{r['commit']}` ({r['world_version']}), seed {seeds}{split}, "
+        lines.append(f"- **{h}**: {published(r['command'], r.get('data_source'))} at `{r['commit']}` "
+                     f"({r['world_version']}), seed {seeds}{split}, "
                      f"{r['machine']}{wall}." + (f" {r['note']}" if r.get("note") else ""))
     return "\n".join(lines) + "\n"

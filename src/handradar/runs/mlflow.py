@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from handradar.atomic import file_lock
-from handradar.provenance import machine
+from handradar.provenance import machine, read_source
 from handradar.runs.hydra import invocation
 
 log = logging.getLogger(__name__)
@@ -37,14 +37,23 @@ T = TypeVar("T")
 
 MAX_PARAM_LEN = 500  # MLflow's limit on a parameter value
 TAG_PREFIX = "handradar."
-# MLflow 3's UI opens an experiment by its kind; without the tag it guesses GenAI for new stores.
+# MLflow 3's UI shows an experiment as GenAI or as model training. Releases that read the experiment's kind take
+# it from this tag; later ones (3.17: mlflow/server/js) ignore it for a sidebar switch kept in the browser, GenAI
+# unless a link says otherwise: DASHBOARD_VIEW.
 EXPERIMENT_KIND_TAG, MODEL_TRAINING = "mlflow.experimentKind", "custom_model_development"
+DASHBOARD_VIEW = "workflowType=machine_learning"
 
 
 def sqlite_path(tracking_uri: str) -> Path | None:
     """The database file of a ``sqlite:///`` URI (None for other stores)."""
     prefix = "sqlite:///"
     return Path(tracking_uri[len(prefix):]) if tracking_uri.startswith(prefix) else None
+
+
+def store_exists(tracking_uri: str) -> bool:
+    """False for a SQLite store whose file is not there yet: a reader must not create it (any other store: True)."""
+    db = sqlite_path(tracking_uri)
+    return db is None or db.is_file()
 
 
 def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
@@ -201,13 +210,25 @@ class Tracker:
             self._call(lambda c: c.log_dict(self.run_id, obj, name))
 
 
+def dashboard_links(tracking_uri: str, base_url: str) -> dict[str, str]:
+    """{experiment name: its page in the MLflow dashboard serving ``tracking_uri`` at ``base_url``, opened as
+    model training} for every experiment of the store but MLflow's own ``Default`` (none before the first run)."""
+    if not store_exists(tracking_uri):
+        return {}
+    exps = Tracker(tracking_uri, "")._call(lambda c: c.search_experiments())
+    return {e.name: f"{base_url.rstrip('/')}/#/experiments/{e.experiment_id}?{DASHBOARD_VIEW}"
+            for e in sorted(exps, key=lambda e: e.name) if e.name != "Default"}
+
+
 @dataclass(frozen=True)
 class DataRef:
-    """The dataset a run reads: a readable name, its content digest and where it lies."""
+    """The dataset a run reads: a readable name, its content digest, where it lies and, for a folder that
+    recorded it, the command that wrote it (handradar.provenance.read_source)."""
 
     name: str
     digest: str
     path: Path
+    source: str | None = None
 
     @classmethod
     def of(cls, data_cfg: Mapping | None, path: str | Path, digest: str) -> DataRef:
@@ -215,7 +236,7 @@ class DataRef:
         pointed at, else after the file itself (the reference world's cached dataset)."""
         d = dict(data_cfg or {})
         label = Path(str(d["root"])).name if d.get("root") else Path(str(d.get("path") or path)).stem
-        return cls(label, digest, Path(path))
+        return cls(label, digest, Path(path), read_source(d["root"]) if d.get("root") else None)
 
     def run_name(self, preset: str, seed: int) -> str:
         """``<preset>-<data>-seed<seed>``: runs of one preset on several data sets are told apart."""
@@ -228,9 +249,11 @@ def tracked_run(tracker: Tracker, *, run_name: str, tags: Mapping[str, Any], con
     """A job's MLflow run: started (or resumed when ``run_id`` is in the store) with ``handradar.``
     tags, the resolved ``config`` (params + ``config.yaml``) and its ``dataset`` as an input, ended
     FINISHED, or KILLED / FAILED when the job raises. Yields the run id (None for a disabled tracker).
-    Every run also gets ``command`` (the Hydra job's command line, when there is one) and ``machine`` tags
-    unless ``tags`` gives them: what ``make tables`` prints beside each result."""
-    where = {"machine": machine(), **({"command": cmd} if (cmd := invocation()) else {})}
+    Every run also gets ``command`` (the Hydra job's command line, when there is one), ``machine`` and, where its
+    data folder recorded it, ``data_source`` tags unless ``tags`` gives them: what ``make tables`` prints beside
+    each result."""
+    where = {"machine": machine(), **({"command": cmd} if (cmd := invocation()) else {}),
+             **({"data_source": dataset.source} if dataset is not None and dataset.source else {})}
     prefixed = {f"{TAG_PREFIX}{k}": str(v) for k, v in {**where, **tags}.items()}
     rid = tracker.start(run_id=run_id, run_name=run_name, tags=prefixed)
     if tracker.enabled:
@@ -247,3 +270,10 @@ def tracked_run(tracker: Tracker, *, run_name: str, tags: Mapping[str, Any], con
             tracker.end("KILLED" if isinstance(exc, KeyboardInterrupt) else "FAILED")
         raise
     tracker.end("FINISHED")
+
+
+if __name__ == "__main__":  # make mlflow-ui: the links to open before the dashboard starts
+    import sys
+
+    for name, url in dashboard_links(*sys.argv[1:3]).items():
+        print(f"{name}: {url}")

@@ -12,22 +12,34 @@
 
 Cells are ``mean ± std`` of the accuracy over the records of a row (seeds), with the count.
 A record is ``{"params": flat config (dotted keys -> str), "metrics": {name: float}}``, optionally with
-``"provenance"`` (:func:`provenance`: command, commit, seed, machine): each row then lists the runs
-behind it (:meth:`Table.provenance_markdown`; ``make tables`` writes both to docs/results.md).
+``"provenance"`` (:func:`provenance`: command, commit, seed, machine, data source): each row then lists
+the runs behind it (:meth:`Table.provenance_markdown`; ``make tables`` writes both to docs/results.md,
+reading the finished MLflow runs with :func:`load_records`).
+
+A published command names no path of the machine that ran it (:func:`published_command`): where outputs
+and caches went is left out, and a data folder reads ``DIR``, said how to make by the command that wrote
+it (:func:`published`). A row with a run from a working tree with uncommitted changes is marked
+(:data:`DIRTY_MARK`).
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import logging
 import math
 import re
 import shlex
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import PurePath
+from pathlib import Path, PurePath
 
-from handradar.provenance import commit_of
+import yaml
+
+from handradar.provenance import REPO_ROOT, commit_of
+from handradar.runs.mlflow import TAG_PREFIX, Tracker, store_exists
+
+log = logging.getLogger(__name__)
 
 VARIANT_COLUMNS = (
     ("radar_only", "Radar only"),
@@ -50,6 +62,13 @@ SYNTH_COLUMNS = (("ssim_model", "SSIM modelling"), ("ssim_enhanced", "SSIM + Rad
                  ("mse_model", "MSE modelling"), ("mse_enhanced", "MSE + RadarWeightNet"))
 SYNTH_JOB = "handradar.synthesis.job.run_synth_fit"
 PRETRAIN_METRIC = re.compile(r"^test/acc_(scratch|pretrained)_(\d+)c_(\d+)pct$")
+DEFAULT_TRACKING_URI = f"sqlite:///{REPO_ROOT / 'logs' / 'mlflow' / 'mlflow.db'}"  # conf/logger/mlflow.yaml's store
+# overrides that only say where outputs and caches go change no result (the job hash leaves paths out)
+WHERE_KEYS = ("paths.", "hydra.run.", "hydra.sweep.")
+LOCAL = "DIR"  # a path of the machine that ran a job, as a published command shows it
+DIRTY_MARK = "†"
+DIRTY_NOTE = (f"{DIRTY_MARK}: a run behind it was made from a working tree with uncommitted changes (its commit reads "
+              "`.dirty`), so that commit alone does not reproduce it.")
 
 
 @dataclass
@@ -73,7 +92,8 @@ class Table:
         lines = []
         for r in self.sorted_rows():
             runs = group_runs(self.sources.get(r, []))
-            text = "; ".join(f"`{g['command']}` at `{g['commit']}`, seed{'s' if len(g['seeds']) > 1 else ''} "
+            text = "; ".join(f"{published(g['command'], g['data_source'])} at `{g['commit']}`, "
+                             f"seed{'s' if len(g['seeds']) > 1 else ''} "
                              f"{', '.join(g['seeds'])}, {g['machine']}" + (" (command reconstructed from the run's tags)"
                                                                            if g["reconstructed"] else "")
                              for g in runs)
@@ -85,13 +105,20 @@ class Table:
     def sorted_rows(self) -> list[str]:
         return sorted(self.rows, key=lambda r: (self.order[r], r))
 
+    def dirty_rows(self) -> list[str]:
+        """Rows with a run from a working tree with uncommitted changes."""
+        return [r for r in self.sorted_rows() if any(dirty(src["commit"]) for src in self.sources.get(r, []))]
+
     def markdown(self) -> str:
+        """The table; a row from a dirty tree is marked (:data:`DIRTY_MARK`), with the note under the table."""
         lines = [f"**{self.title}**", "", "| | " + " | ".join(self.columns) + " |",
                  "|---|" + "---|" * len(self.columns)]
+        marked = self.dirty_rows()
         for r in self.sorted_rows():
-            lines.append(f"| {r} | " + " | ".join(mean_std(self.rows[r].get(c, []), signed=c in self.signed)
-                                                   for c in self.columns) + " |")
-        return "\n".join(lines)
+            lines.append(f"| {r}{' ' + DIRTY_MARK if r in marked else ''} | "
+                         + " | ".join(mean_std(self.rows[r].get(c, []), signed=c in self.signed)
+                                      for c in self.columns) + " |")
+        return "\n".join(lines + (["", DIRTY_NOTE] if marked else []))
 
     def csv(self) -> str:
         buf = io.StringIO()
@@ -120,7 +147,8 @@ def provenance(tags: Mapping[str, str], params: Mapping[str, str], overrides: Se
                script: str = "train.py") -> dict:
     """Where a run's figures come from: ``command`` (its ``handradar.command`` tag, else ``python SCRIPT``
     with the job's Hydra ``overrides``, else rebuilt from its preset and seed: ``reconstructed``), ``commit``,
-    ``seed`` and ``machine`` ("not recorded" for runs logged before the tag existed)."""
+    ``seed``, ``machine`` ("not recorded" for runs logged before the tag existed) and ``data_source`` (its
+    ``handradar.data_source`` tag: the command that wrote its data folder, None where not recorded)."""
     seed = str(tags.get("handradar.seed", params.get("seed", "?")))
     command, rebuilt = tags.get("handradar.command"), False
     if not command and overrides is not None:
@@ -128,19 +156,20 @@ def provenance(tags: Mapping[str, str], params: Mapping[str, str], overrides: Se
     if not command:
         command, rebuilt = f"python {script} +experiment={tags.get('handradar.preset', '?')} seed={seed}", True
     return {"command": command, "commit": commit_of(tags.get("handradar.code_version", "")), "seed": seed,
-            "machine": tags.get("handradar.machine", "machine not recorded"), "reconstructed": rebuilt}
+            "machine": tags.get("handradar.machine", "machine not recorded"), "reconstructed": rebuilt,
+            "data_source": tags.get("handradar.data_source")}
 
 
 def group_runs(sources: Sequence[Mapping]) -> list[dict]:
-    """Runs that differ only in their seed, as one multirun command (``-m ... seed=1,2,3``)."""
+    """Runs that differ only in their seed, as one multirun command (``-m ... seed=1,2,3``), as published
+    (:func:`published_command`)."""
     groups: dict[tuple, dict] = {}
     for src in sources:
-        words = shlex.split(src["command"])
-        # where outputs and caches go changes no result (the job hash leaves paths out): not part of the command
-        base = [w for w in words if not w.startswith(("seed=", "paths."))]
-        key = (tuple(base), src["commit"], src["machine"], src.get("reconstructed", False))
+        base = [w for w in shlex.split(published_command(src["command"])) if not w.startswith("seed=")]
+        key = (tuple(base), src["commit"], src["machine"], src.get("reconstructed", False), src.get("data_source"))
         g = groups.setdefault(key, {"base": base, "commit": src["commit"], "machine": src["machine"], "seeds": [],
-                                    "reconstructed": src.get("reconstructed", False)})
+                                    "reconstructed": src.get("reconstructed", False),
+                                    "data_source": src.get("data_source")})
         if src["seed"] not in g["seeds"]:
             g["seeds"].append(src["seed"])
     out = []
@@ -154,11 +183,51 @@ def group_runs(sources: Sequence[Mapping]) -> list[dict]:
     return out
 
 
+def _local(word: str) -> str:
+    """A path of the machine that ran a job as :data:`LOCAL` (a file keeps its name: ``DIR/folders.yaml``);
+    any other word as it is."""
+    if not word.startswith(("/", "~")):
+        return word
+    path = PurePath(word)
+    return f"{LOCAL}/{path.name}" if path.suffix else LOCAL
+
+
+def published_command(command: str, skip: Iterable[str] = ()) -> str:
+    """``command`` as a published record shows it: overrides of where outputs and caches go (``paths.*``, and
+    the keys in ``skip``) left out, and every absolute path, an argument or an override's value, as ``DIR``."""
+    words = []
+    for word in shlex.split(command):
+        key, eq, value = word.partition("=")
+        name = key.lstrip("+~")
+        if eq and (name.startswith(WHERE_KEYS) or name in skip):
+            continue
+        words.append(f"{key}={_local(value)}" if eq else _local(word))
+    return " ".join(map(shlex.quote, words))
+
+
+def published(command: str, data_source: str | None = None) -> str:
+    """A command for a published record, in backticks (:func:`published_command`); where it names a folder
+    as ``DIR``, what that folder holds: ``data_source``, the command that wrote it, or that it is not recorded."""
+    shown = published_command(command)
+    values = [w.partition("=")[2] or w for w in shlex.split(shown)]
+    if not any(v == LOCAL or v.startswith(f"{LOCAL}/") for v in values):
+        return f"`{shown}`"
+    made = f"written by `{published_command(data_source)}`" if data_source else "its source not recorded"
+    return f"`{shown}` ({LOCAL}: {made})"
+
+
+def dirty(commit: str) -> bool:
+    """Whether a commit (:func:`handradar.provenance.commit_of`) is of a working tree with uncommitted changes."""
+    return commit.endswith(".dirty")
+
+
 def results_markdown(tables: Sequence[Table], source: str) -> str:
     """docs/results.md: every table, and under it each row's runs (command, commit, seeds, machine)."""
     sections = [f"# handradar results\n\nGenerated by `make tables` from the finished MLflow runs in {source}; "
                 "do not edit. Each cell is the mean ± standard deviation over seeds (n: how many). Under each table, "
-                "the runs behind each row: the command that reproduces them, the commit, the seeds and the machine."]
+                "the runs behind each row: the command that reproduces them, the commit, the seeds and the machine. "
+                f"A command names its data folder `{LOCAL}` and says which command wrote it; where outputs and caches "
+                "went is left out."]
     for t in tables:
         sections.append(t.markdown() + "\n\nRuns:\n\n" + t.provenance_markdown())
     if not tables:
@@ -290,3 +359,47 @@ def job_table(params: Mapping[str, str], metrics: Mapping[str, float]) -> str:
     """The table rows of one finished job (what train.py prints at its end)."""
     tables = build_tables([{"params": params, "metrics": metrics}])
     return "\n\n".join(t.markdown() for t in tables) if tables else "(no table metrics)"
+
+
+def load_records(tracking_uri: str) -> list[dict]:
+    """Finished handradar runs as ``{"params", "metrics", "tags", "run_id", "provenance"}``, latest per job hash,
+    the latest first."""
+    if not store_exists(tracking_uri):  # nothing has run yet
+        log.warning("no MLflow store at %s", tracking_uri)
+        return []
+    tracker = Tracker(tracking_uri, "", retries=8)
+
+    def search(client) -> list:
+        exps = [e.experiment_id for e in client.search_experiments()]
+        runs, token = [], None
+        while exps:  # pages of 1000 runs
+            page = client.search_runs(exps, filter_string="attributes.status = 'FINISHED'", max_results=1000,
+                                      order_by=["attributes.start_time DESC"], page_token=token)
+            runs += list(page)
+            token = page.token
+            if not token:
+                break
+        return runs
+
+    latest: dict[str, dict] = {}
+    for run in tracker._call(search):
+        tags = run.data.tags
+        key = tags.get(f"{TAG_PREFIX}job_hash")
+        if key is None or key in latest:  # not a handradar job, or an older run of the same job
+            continue
+        params = dict(run.data.params)
+        latest[key] = {"params": params, "metrics": dict(run.data.metrics), "tags": dict(tags),
+                       "run_id": run.info.run_id, "provenance": provenance(tags, params, job_overrides(tags))}
+    return list(latest.values())
+
+
+def job_overrides(tags: Mapping[str, str]) -> list[str] | None:
+    """The command-line overrides Hydra kept in the run folder (``.hydra/overrides.yaml``), if it still exists."""
+    path = Path(tags.get(f"{TAG_PREFIX}run_dir", "")) / ".hydra" / "overrides.yaml"
+    if not tags.get(f"{TAG_PREFIX}run_dir") or not path.is_file():
+        return None
+    try:
+        got = yaml.safe_load(path.read_text())
+    except yaml.YAMLError:
+        return None  # an unreadable folder only costs the row its exact command
+    return [str(o) for o in got] if isinstance(got, list) else None
