@@ -246,3 +246,20 @@ def test_a_row_from_a_dirty_tree_is_marked_in_the_table():
     assert "| 20 % | 0.800 | – | – | – | – | – | – |" in lines
     assert lines[-1] == DIRTY_NOTE and "`2381649.dirty`" in results_markdown([few], "x")
     assert DIRTY_NOTE not in build_tables(records[1:])[0].markdown()  # a clean table carries no note
+
+
+def test_measured_rows_per_split_and_k():
+    """A measured job's metrics become rows "K per class, <split> {measured: <manifest>}", one column a variant."""
+    p = {"job": "handradar.tasks.measured.run_measured", "split.per_class": "8", "seed": "1",
+         "data.dataset._target_": "handradar.data.measured.MeasuredDataset",
+         "data.dataset.manifest": "/any/where/xia2021.yaml"}
+    metrics = {"test/acc_radar_only_A": 0.5, "test/acc_radar_only_B": 0.6, "test/acc_model_synth_only_A": 0.25,
+               "val/acc_radar_only": 0.9}
+    text = job_table(p, metrics)
+    assert "| 8 per class, A {measured: xia2021} | 0.500 | – | – | 0.250 |" in text
+    assert "| 8 per class, B {measured: xia2021} | 0.600 | – | – | – |" in text
+    assert "/any/where" not in text and "0.900" not in text  # validation is for choosing, not for the table
+    tables = build_tables([{"params": {**p, "split.per_class": "all"}, "metrics": {"test/acc_radar_only_A": 0.7}},
+                           {"params": p, "metrics": metrics}])
+    rows = tables[0].sorted_rows()
+    assert rows.index("8 per class, A {measured: xia2021}") < rows.index("all per class, A {measured: xia2021}")

@@ -50,6 +50,13 @@ VARIANT_COLUMNS = (
     ("model_synth_only", "synthetic only (model-based)"),
     ("radar_pool", "radar, whole pool"),
 )
+MEASURED_JOB = "handradar.tasks.measured.run_measured"
+MEASURED_COLUMNS = (  # handradar.tasks.measured.MEASURED_VARIANTS
+    ("radar_only", "Radar only"),
+    ("model_synth", "+ synthetic"),
+    ("synth_pretrain", "synthetic pre-training, fine-tuned"),
+    ("model_synth_only", "synthetic only"),
+)
 OOD_LABELS = {
     "angle": "angle (0° → ±30°)",
     "subject": "subject (unseen subjects)",
@@ -277,6 +284,8 @@ def data_setting(p: Mapping[str, str], tags: Mapping[str, str] | None = None) ->
     is named by the job's ``handradar.world`` tag (its Hydra choice), else, for runs logged before the tag,
     by its seed (0: the default world)."""
     target = p.get("data.dataset._target_", "")
+    if target.endswith("MeasuredDataset"):
+        return f" {{measured: {PurePath(p.get('data.dataset.manifest', '?')).stem}}}"
     if target.endswith("RecordingsFolder"):
         return f" {{recordings: {PurePath(p.get('data.dataset.root', '?')).name}}}"
     if target.endswith("DatasetFile"):
@@ -298,6 +307,8 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
     pre = Table("table3_pretrain", "Table III: accuracy with and without pre-training on external synthetic data",
                 ["from scratch", "pre-trained", "pre-trained minus scratch"], signed=("pre-trained minus scratch",))
     ood = Table("table4_ood", "Table IV: out-of-distribution accuracy", variant_cols)
+    measured = Table("measured", "Measured radar: accuracy on each held-out test split, K real rows per class of the "
+                                 "training users", [label for _, label in MEASURED_COLUMNS])
     seen: set[tuple] = set()  # (table, row, column, seed): records come latest first, the latest run counts
     for rec in records:
         p, metrics = rec["params"], rec["metrics"]
@@ -308,6 +319,9 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
                     value = metrics.get(f"test/{key}{suffix}")
                     if value is not None:
                         synth.add(row + where, label, value, (i, where), rec.get("provenance"))
+            continue
+        if p.get("job") == MEASURED_JOB:
+            _add_measured(measured, rec, where, seen)
             continue
         if p.get("job") not in ("variants", "external_pretrain"):
             continue  # not a train.py job
@@ -352,7 +366,25 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             if value is not None and (p.get("seed") is None or cell not in seen):
                 seen.add(cell)
                 table.add(row, label, value, key, rec.get("provenance"))
-    return [t for t in (synth, few, pre, ood) if t.rows]
+    return [t for t in (synth, few, pre, ood, measured) if t.rows]
+
+
+def _add_measured(table: Table, rec: Mapping, where: str, seen: set[tuple]) -> None:
+    """A measured job's ``test/acc_<variant>_<split>`` as rows "K per class, <split>" of ``table``."""
+    p, metrics = rec["params"], rec["metrics"]
+    k = p.get("split.per_class", "?")
+    order = 10**9 if k == "all" else int(float(k)) if k not in ("?", "None") else -1
+    for variant, label in MEASURED_COLUMNS:
+        prefix = f"test/acc_{variant}_"
+        for name, value in metrics.items():
+            if not name.startswith(prefix):
+                continue
+            split = name[len(prefix):]
+            row = f"{k} per class, {split}{where}"
+            cell = (table.name, row, label, p.get("seed"))
+            if p.get("seed") is None or cell not in seen:
+                seen.add(cell)
+                table.add(row, label, value, (where, split, order), rec.get("provenance"))
 
 
 def job_table(params: Mapping[str, str], metrics: Mapping[str, float]) -> str:
