@@ -7,26 +7,17 @@ import numpy as np
 import pytest
 
 from handradar.world.config import Effects, Scene
+from handradar.world.geometry import Part, _palm_faces, _revolved, frustum, palm_template, surfaces_of
 from handradar.world.optics import (
     parallelogram_factor,
     polygon_integral,
     rcs_of_integral,
     triangle_factor,
 )
-from handradar.world.scene import (
-    Part,
-    _palm_faces,
-    _revolved,
-    amplitude_scale,
-    buried,
-    frustum,
-    group_wavenumber,
-    palm_template,
-    skin_texture,
-    surface_tracks,
-    surfaces_of,
-    triangle_centroid_factor,
-)
+from handradar.world.scattering import amplitude_scale, group_wavenumber, skin_texture
+from handradar.world.scene import surface_tracks
+from handradar.world.shadowing import buried
+from handradar.world.tracks import triangle_centroid_factor
 
 RNG = np.random.default_rng(7)
 

@@ -24,16 +24,11 @@ from handradar.world.generate import (
     subject,
     write_recording,
 )
+from handradar.world.geometry import Cone, Part, build_parts, occluders_of
 from handradar.world.kinematics import Motion
 from handradar.world.points import bone_points, point_rcs
-from handradar.world.scene import (
-    Cone,
-    Part,
-    amplitude_scale,
-    build_parts,
-    occluders_of,
-    point_tracks,
-)
+from handradar.world.scattering import amplitude_scale
+from handradar.world.scene import point_tracks
 from handradar.world.sensor import observe
 
 LAW = BonePoints(spacing_m=1.0, rcs_per_area=1.0, exponent=4.0, isotropic=0.1)  # spacing 1 m: 4 points a ring

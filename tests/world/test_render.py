@@ -20,7 +20,7 @@ from handradar.world.render import (
     iq_coefficients,
     synthesize_beat,
 )
-from handradar.world.scene import DIRECT, ScatterTracks
+from handradar.world.tracks import DIRECT, ScatterTracks
 from tests.world.conftest import range_doppler, with_effects
 
 

@@ -10,19 +10,12 @@ import pytest
 from handradar.radar.chain import column_times_s, gate_bins, velocity_axis_m_s
 from handradar.world.config import AntennaPattern, Scene
 from handradar.world.generate import RecordingSpec, simulate
+from handradar.world.geometry import Surfaces, build_surfaces
 from handradar.world.kinematics import Motion, Subject
 from handradar.world.render import fast_profiles
-from handradar.world.scene import (
-    BOUNCE,
-    Surfaces,
-    antenna_gain,
-    build_surfaces,
-    facet_geometry,
-    facet_rcs,
-    pattern_exponents,
-    strip_along_factor,
-    visibility,
-)
+from handradar.world.scattering import antenna_gain, facet_geometry, facet_rcs, pattern_exponents
+from handradar.world.shadowing import visibility
+from handradar.world.tracks import BOUNCE, strip_along_factor
 from tests.world.conftest import range_doppler, with_effects
 
 

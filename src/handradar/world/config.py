@@ -226,7 +226,7 @@ class BonePoints:
 @dataclass(frozen=True)
 class Scene:
     """Surface tessellation, skin reflectivity and the ADC scale; ``scattering`` picks how the direct
-    returns are built: ``surfaces`` (physical optics and skin texture, handradar.world.scene) or
+    returns are built: ``surfaces`` (physical optics and skin texture, handradar.world.scattering) or
     ``bone_points`` (discrete scatterers with an RCS law of their own, handradar.world.points)."""
 
     scattering: str = "surfaces"

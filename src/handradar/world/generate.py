@@ -42,8 +42,9 @@ from handradar.vocab import GESTURES
 from handradar.world.config import WORLD_VERSION, WorldConfig, world_config
 from handradar.world.kinematics import GESTURE_TABLE, Motion, Subject
 from handradar.world.render import adc_cube, fast_profiles, noise_sigma
-from handradar.world.scene import ScatterTracks, scene_tracks
+from handradar.world.scene import scene_tracks
 from handradar.world.sensor import LeapObservation, nominal_leap_to_radar, observe
+from handradar.world.tracks import ScatterTracks
 
 
 @dataclass(frozen=True)

@@ -1,14 +1,14 @@
 """Discrete bone scatterers: the direct returns of ``world.scene.scattering: bone_points``.
 
 A reference world whose scattering is built differently in kind from the surfaces world
-(handradar.world.scene: physical optics over smooth surfaces plus a skin texture) and from the
+(handradar.world.scattering: physical optics over smooth surfaces plus a skin texture) and from the
 simulator (handradar.sim: one cylinder per bone with the paper's cylinder RCS): every part of the
 hands carries a fixed set of point scatterers, each with an RCS law of its own, and the hand's
 return is their coherent sum. Nothing is integrated over a surface, so there is no specular flash
 of a cylinder's broadside nor a plate lobe of the palm; the points' returns fluctuate from point to
 point instead (Swerling I) and interfere along each bone.
 
-Placement, per recording, on the parts of :func:`handradar.world.scene.build_parts` (so the palm,
+Placement, per recording, on the parts of :func:`handradar.world.geometry.build_parts` (so the palm,
 forearm and occlusion effects keep their meaning). On every cone (finger bone, fingertip cap,
 forearm) a grid at its cells' centres, ``n_around`` azimuths by ``n_along`` rings,
 
@@ -28,9 +28,9 @@ rho = ``points.rcs_per_area`` and rho_iso = ``points.isotropic`` (m^2 per m^2 of
 ``points.exponent``; g_i ~ Exponential(mean 1) and a phase phi_i ~ U(0, 2 pi) drawn once per
 recording, so each point's complex amplitude is circular Gaussian (Swerling I: constant over a
 recording, independent between points and recordings). Bistatic (double bounces, handradar.world.
-scene.bounce_paths): theta from the half-vector of the two directions, zero unless both lie in front.
+scattering.bounce_paths): theta from the half-vector of the two directions, zero unless both lie in front.
 
-Amplitude in ADC counts, the radar equation of the surfaces world (scene.amplitude_scale K, the
+Amplitude in ADC counts, the radar equation of the surfaces world (scattering.amplitude_scale K, the
 antenna's power gain G when the antenna_pattern effect is on):
 
     A_i = K sqrt(sigma_i) G / R_i^2 vis_i exp(j phi_i)   at range R_i (the renderer adds the carrier),
@@ -73,7 +73,7 @@ class PointSet:
 
 
 def cone_grid(cone: Any, spacing_m: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cell centres (phi, w) (N,) of the grid on a cone (handradar.world.scene.Cone) and each cell's
+    """Cell centres (phi, w) (N,) of the grid on a cone (handradar.world.geometry.Cone) and each cell's
     area (N,) m^2 (at the first step); the grid is turned by a random fraction of one azimuth cell."""
     slant = math.hypot(float(cone.l1[0] - cone.l0[0]), cone.r1 - cone.r0)
     n_around = max(MIN_AROUND, math.ceil(2 * math.pi * max(cone.r0, cone.r1) / spacing_m))
@@ -118,7 +118,7 @@ def face_normals(poly: np.ndarray, inside: np.ndarray, rotation: np.ndarray, n: 
 
 
 def bone_points(parts: Sequence[Any], spacing_m: float, rng: np.random.Generator) -> PointSet:
-    """The point scatterers of every part (handradar.world.scene.Part) at every step: cones' grids,
+    """The point scatterers of every part (handradar.world.geometry.Part) at every step: cones' grids,
     the palm slab's face grids; the Swerling gains and phases drawn last."""
     pts, nrm, area, slot, owner, label = [], [], [], [], [], []
     for ip, p in enumerate(parts):
@@ -151,7 +151,7 @@ def point_rcs(normal: np.ndarray, area: np.ndarray, u_in: np.ndarray, u_out: np.
     """RCS (m^2) of points with outward ``normal`` (..., 3) standing for ``area`` (...) m^2 (the
     Swerling gain included) for incoming-from ``u_in`` and outgoing-to ``u_out`` unit directions:
     area (rho cos_h^q + rho_iso), cos_h from the half-vector, zero unless both directions are in front.
-    The same signature as handradar.world.scene.facet_rcs (the surfaces' law) for bounce_paths."""
+    The same signature as handradar.world.scattering.facet_rcs (the surfaces' law) for bounce_paths."""
     law = scene.points
     c_in = (normal * u_in).sum(-1)
     c_out = (normal * u_out).sum(-1)

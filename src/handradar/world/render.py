@@ -12,7 +12,7 @@ Two routes with the same physics (docs/architecture.md, "Processing chain and si
 Motion: scatterer ranges are interpolated from the physics rate to each chirp's sampling time
 (RadarConfig.chirp_times_s, idle gaps between frames included) with a cubic spline, point
 amplitudes (which carry the shadowing) linearly; a facet track's complex amplitude is evaluated at
-each chirp from its physical-optics elements and texture points (scene.SurfaceTracks), whose
+each chirp from its physical-optics elements and texture points (tracks.SurfaceTracks), whose
 relative phases change much faster than the physics rate.
 """
 
@@ -32,7 +32,7 @@ from handradar.radar.chain import (
 from handradar.radar.config import RadarConfig
 from handradar.radar.signal import carrier_phase_rad, doppler_mirror
 from handradar.world.config import Effects, IQImbalance
-from handradar.world.scene import STATIC, ScatterTracks
+from handradar.world.tracks import STATIC, ScatterTracks
 
 _BLOCK = 16  # fast-time samples per block of the matrix-product synthesis
 _TABLE_STEPS_PER_BIN = 64
