@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import handradar.gap.diagnosis as diagnosis_module
 from handradar.gap.diagnosis import (
     Candidate,
     Diagnosis,
@@ -48,13 +49,26 @@ def _comparable(report: dict) -> dict:
 # in the per-bone residual energies, which sum many such values.
 FLOAT_TOL = {"rel": 1e-4, "abs": 5e-6}
 TIED = 1e-5  # a candidate closing less than this is tied with the baseline to float32 precision
-TRAINED_REL = 1e-2  # numbers of a network after SGD steps, where those roundings grow
+# Pearson correlations with the log weights of a network after SGD steps (radarweightnet.weight_correlation),
+# where those roundings grow: compared absolutely, since a correlation near 0 has no relative precision.
+# Single-split run: the golden's 0.03114, 0.03146 on an Intel Xeon; moving the measured spectrograms by one
+# float32 ulp (seeded, up or down) moved it over 0.03106 ... 0.03156 while the training loss moved by 3e-7.
+TRAINED_CORR = {"rel": FLOAT_TOL["rel"], "abs": 2e-3}
+# Two grid points whose scores (mean SSIM over the fit rows of float32 SSIMs) differ by less than this are
+# tied: which one argmax (or the "refined only if it scores better" rule) takes is rounding, not the code
+# path. The golden's 27 grid scores differ from an Intel Xeon's by up to 8.6e-8; real choices are far
+# apart (antenna_pattern q 4 -> 8: 2.6e-3). Seen: palm's radius_m in step 3 of single_split_run (not
+# chosen: +1.6e-5 on the fit rows), whose five grid points score within 5e-8 of each other (its radius
+# changes the spectrograms by < 1e-6, the palm itself by 8e-4): 0.02 in the golden, 0.04 on the Xeon,
+# 0.0075 or a refined 0.0143 when the measured rows move by one ulp.
+GRID_TIED = 1e-6
 
 
-def _assert_same(got, want, where: str = "report", rel: float = FLOAT_TOL["rel"]) -> None:
-    """Equal structure, equal strings and integers, floats equal to float32 rounding (FLOAT_TOL). A
-    candidate tied with the baseline (|gap_closed| < TIED) is compared by name only: which grid point
-    or signature a change of 1e-8 gets is rounding, not the code path."""
+def _assert_same(got, want, where: str = "report", tol: dict = FLOAT_TOL) -> None:
+    """Equal structure, equal strings and integers, floats equal to float32 rounding (FLOAT_TOL;
+    TRAINED_CORR for the RadarWeightNet weight correlations). A candidate tied with the baseline
+    (|gap_closed| < TIED) is compared by name only: which grid point or signature a change of 1e-8
+    gets is rounding, not the code path."""
     if isinstance(want, dict):
         assert isinstance(got, dict) and set(got) == set(want), f"{where}: keys {sorted(got)} != {sorted(want)}"
         gap = want.get("gap_closed", want.get("gap_closed_of_remaining"))
@@ -62,24 +76,69 @@ def _assert_same(got, want, where: str = "report", rel: float = FLOAT_TOL["rel"]
             assert got["effect"] == want["effect"], f"{where}: {got['effect']} != {want['effect']}"
             return
         for k in want:
-            _assert_same(got[k], want[k], f"{where}.{k}", TRAINED_REL if k == "weight_correlation" else rel)
+            _assert_same(got[k], want[k], f"{where}.{k}", TRAINED_CORR if k == "weight_correlation" else tol)
     elif isinstance(want, list):
         assert isinstance(got, list) and len(got) == len(want), f"{where}: length {len(got)} != {len(want)}"
         for i, (g, w) in enumerate(zip(got, want)):
-            _assert_same(g, w, f"{where}[{i}]", rel)
+            _assert_same(g, w, f"{where}[{i}]", tol)
     elif isinstance(want, float) and not isinstance(got, bool):
-        assert got == pytest.approx(want, rel=rel, abs=FLOAT_TOL["abs"], nan_ok=True), f"{where}: {got} != {want}"
+        assert got == pytest.approx(want, rel=tol["rel"], abs=tol["abs"], nan_ok=True), f"{where}: {got} != {want}"
     else:
         assert got == want, f"{where}: {got!r} != {want!r}"
 
 
-def test_one_fold_is_the_single_split_number_for_number(radar, short_chain):
+def _record_fits(monkeypatch) -> dict[str, dict[str, GridFit]]:
+    """Every candidate fit of the diagnosis as it was used (after any gradient refinement), by its step
+    label ("step 2", ...; the selection reports only the chosen parameters)."""
+    fits: dict[str, dict[str, GridFit]] = {}
+    fit = diagnosis_module._Runner.fit
+
+    def recorded(self, engine, names, fit_idx, refine_idx, step):
+        fits[step] = fit(self, engine, names, fit_idx, refine_idx, step)
+        return fits[step]
+
+    monkeypatch.setattr(diagnosis_module._Runner, "fit", recorded)
+    return fits
+
+
+def _accept_tied_choices(got: dict, want: dict, fits: dict[str, dict[str, GridFit]]) -> list[str]:
+    """The selection's candidates whose parameters differ from the golden's by a choice between tied grid
+    points (GRID_TIED) take the golden's in ``got``, so that _assert_same compares everything else (their
+    gap_closed and CI included). Asserted for each: the golden's point is on this run's grid and scores
+    within GRID_TIED of the point chosen here, and the selection did not add the effect, so nothing later
+    in the report depends on its value. Any other difference is left to _assert_same. Returns where."""
+    accepted = []
+    for got_step, want_step in zip(got["selection"], want["selection"]):
+        for g, w in zip(got_step["candidates"], want_step["candidates"]):
+            if "params" not in w or g["effect"] != w["effect"]:
+                continue
+            try:
+                _assert_same(g["params"], w["params"])
+                continue
+            except AssertionError:
+                pass
+            where = f"selection step {want_step['step']}: {w['effect']} {g['params']} (golden {w['params']})"
+            fit = fits[f"step {want_step['step']}"][w["effect"]]
+            assert fit.best == g["params"] and w["params"] in fit.grid, where
+            margin = fit.best_score - fit.scores[fit.grid.index(w["params"])]
+            assert abs(margin) < GRID_TIED, f"{where}: scores {margin:.3g} apart, not tied"
+            assert w["effect"] not in want["after"]["effects"], f"{where}: tied, but the selection added it"
+            g["params"] = dict(w["params"])
+            accepted.append(f"{where}: {margin:.2g} apart")
+    return accepted
+
+
+def test_one_fold_is_the_single_split_number_for_number(radar, short_chain, monkeypatch):
+    fits = _record_fits(monkeypatch)
     got = json.loads(json.dumps(_comparable(single_split_run(radar, short_chain, folds=1).report)))
     want = json.loads(GOLDEN.read_text())
     # the keys added since the golden report: folds, the candidates' specificity evidence
     assert got["settings"].pop("folds") == 1 and got["evidence"]["clearly_ahead"]
     for c in got["candidates"]:
         c.pop("specificity", None)
+    # palm's radius in step 3 is a choice among tied grid points (GRID_TIED): the golden's 0.02 or another
+    tied = _accept_tied_choices(got, want, fits)
+    assert all(t.startswith("selection step 3: palm ") for t in tied), tied
     _assert_same(got, want)
     assert want["cause"] == "sync_offset" and want["after"]["effects"] == ["sync_offset", "antenna_pattern"]
     assert all("fold_params" not in c for c in got["candidates"]) and "folds" not in got["baseline"]["calibration"]
@@ -186,7 +245,6 @@ def test_folds_share_their_simulations_and_report_what_unshared_ones_would(radar
     the out-of-fold predictions take their rows from the other fold's fit. Step 1 then simulates each
     grid point and the base once per row, and the report equals that of a diagnosis that simulates
     everything again."""
-    import handradar.gap.diagnosis as diagnosis_module
     from handradar.gap.engine import SpectrogramCache
 
     caches: list[SpectrogramCache] = []
