@@ -254,10 +254,11 @@ def test_measured_rows_per_split_and_k():
          "data.dataset._target_": "handradar.data.measured.MeasuredDataset",
          "data.dataset.manifest": "/any/where/xia2021.yaml"}
     metrics = {"test/acc_radar_only_A": 0.5, "test/acc_radar_only_B": 0.6, "test/acc_model_synth_only_A": 0.25,
-               "val/acc_radar_only": 0.9}
+               "test/acc_model_synth_B": 0.7, "val/acc_radar_only": 0.9}
     text = job_table(p, metrics)
     assert "| 8 per class, A {measured: xia2021} | 0.500 | – | – | 0.250 |" in text
-    assert "| 8 per class, B {measured: xia2021} | 0.600 | – | – | – |" in text
+    assert "| 8 per class, B {measured: xia2021} | 0.600 | 0.700 | – | – |" in text
+    assert "only_A" not in text  # model_synth_only's metric is not model_synth's
     assert "/any/where" not in text and "0.900" not in text  # validation is for choosing, not for the table
     tables = build_tables([{"params": {**p, "split.per_class": "all"}, "metrics": {"test/acc_radar_only_A": 0.7}},
                            {"params": p, "metrics": metrics}])

@@ -374,12 +374,13 @@ def _add_measured(table: Table, rec: Mapping, where: str, seen: set[tuple]) -> N
     p, metrics = rec["params"], rec["metrics"]
     k = p.get("split.per_class", "?")
     order = 10**9 if k == "all" else int(float(k)) if k not in ("?", "None") else -1
-    for variant, label in MEASURED_COLUMNS:
-        prefix = f"test/acc_{variant}_"
-        for name, value in metrics.items():
-            if not name.startswith(prefix):
-                continue
-            split = name[len(prefix):]
+    labels = dict(MEASURED_COLUMNS)
+    for name, value in metrics.items():
+        rest = name.removeprefix("test/acc_")
+        # the longest variant name that prefixes it: model_synth_only_A is model_synth_only's, not model_synth's
+        variant = max((v for v in labels if rest.startswith(v + "_")), key=len, default=None)
+        if rest != name and variant is not None:
+            split, label = rest[len(variant) + 1:], labels[variant]
             row = f"{k} per class, {split}{where}"
             cell = (table.name, row, label, p.get("seed"))
             if p.get("seed") is None or cell not in seen:
