@@ -43,14 +43,13 @@ class GapData:
 
 
 def load_dataset(path: str | Path) -> GapData:
-    """Every row of a dataset file: spectrograms, skeleton windows, labels, meta, radar and chain."""
+    """Every row of a dataset file: spectrograms, skeleton windows, labels, meta, radar and chain (the
+    diagnosis's own check, handradar.gap.diagnosis.check_rows, says whether they are enough)."""
     path = Path(path)
     attrs = read_attrs(path)
     radar, chain = attrs.get("radar"), attrs.get("chain")
     if radar is None or chain is None or "skeleton_rate_hz" not in attrs:
         raise FormatError(path, "needs the attributes radar_cfg, chain and skeleton_rate_hz to simulate its rows")
-    if attrs["n"] < 2:
-        raise FormatError(path, f"a gap diagnosis needs at least 2 rows, found {attrs['n']}")
     with h5py.File(path, "r") as h5:
         measured = h5["spectrograms"][()].astype(np.float32)
         labels = h5["labels"][()].astype(np.int64)
