@@ -64,7 +64,9 @@ def test_ingest_and_the_diagnosis_name_the_fix_of_each_capture(tmp_path, chain, 
     figure, options = read_convention(tmp_path / "d.h5")
     np.testing.assert_allclose(figure, check.mirror_db)
     assert options == {"iq_swap": False, "doppler_flip": False}
-    assert check_convention(load_dataset(tmp_path / "d.h5")).fix() == fix
+    data = load_dataset(tmp_path / "d.h5")
+    assert check_convention(data).fix() == fix
+    np.testing.assert_array_equal(data.take(np.array([2, 0])).range_mirror_db, figure[[2, 0]])  # rows keep theirs
     if fix is not None:
         fixed = ingest(root, tmp_path / "e.h5", chain, progress=False, **{fix: True})
         f = fixed.convention.summary()

@@ -279,8 +279,6 @@ class FolderCases:
         return RecordingsFolder(self.roots[case.name], chain, cache_dir, skeleton_rate_hz=skeleton_rate_hz)
 
 
-
-
 def score(results: Sequence[Mapping]) -> dict:
     """Confusion matrix (cases x attributions), named (top-1 correct), found (:func:`found`), wrong causes,
     inconclusive count, mean gap_closed of the withheld effects."""
