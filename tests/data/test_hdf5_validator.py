@@ -62,6 +62,12 @@ def _meta_subgroup(h5: h5py.File) -> None:  # a group where a (N,) array belongs
     h5["meta"].create_group("nested")
 
 
+def _add(name: str, data: np.ndarray) -> Callable[[h5py.File], None]:
+    def edit(h5: h5py.File) -> None:
+        h5.create_dataset(name, data=data)
+    return edit
+
+
 # (branch, corruption, the problem the message must state); one corruption per branch
 BRANCHES = [
     ("format", _set_attr("format", "handradar.dataset/0"),
@@ -88,6 +94,10 @@ BRANCHES = [
     ("meta not a group", _meta_dataset, r"'meta' must be a group of \(N,\) arrays"),
     ("meta field length", _replace("meta/angle_deg", np.zeros(N - 1)), r"meta/angle_deg must have shape \(3,\), found \(2,\)"),
     ("meta field a group", _meta_subgroup, r"meta/nested must have shape \(3,\), found a group"),
+    ("convention figure length", _add("convention/range_mirror_db", np.zeros(N - 1)),
+     r"convention/range_mirror_db must be \(3,\) float \(dB; NaN where not measured\), found \(2,\) float64"),
+    ("convention figure missing", _add("convention/other", np.zeros(N)),
+     r"convention/range_mirror_db must be \(3,\) float .*, found None"),
     ("config_hash", _del_attr("config_hash"), r"missing attribute 'config_hash'"),
     ("code_version", _del_attr("code_version"), r"missing attribute 'code_version'"),
 ]

@@ -71,11 +71,15 @@ def if_signal(ranges_m: np.ndarray, amplitude: float, *, swap_iq: bool = False,
 
 
 def adc_bytes(ranges_m: np.ndarray, amplitude: float, *, swap_iq: bool = False, mirror_doppler: bool = False,
-              rx_gains: tuple[float, ...] = (1.0,)) -> bytes:
+              rx_gains: tuple[float, ...] = (1.0,), noise_counts: float = 0.0, seed: int = 0) -> bytes:
     """One reflector at ``ranges_m`` (frames, loops) -> DCA1000 bytes, one RX per entry of ``rx_gains``
-    (its amplitude factor; 0: a dead channel), RX-major within each chirp."""
+    (its amplitude factor; 0: a dead channel), RX-major within each chirp. ``noise_counts``: rms (ADC
+    counts) of white Gaussian receiver noise added to I and to Q alike, drawn from ``seed``."""
     sig = if_signal(ranges_m, amplitude, swap_iq=swap_iq, mirror_doppler=mirror_doppler)
     sig = sig[..., None, :] * np.asarray(rx_gains, dtype=np.float64)[:, None]  # (frames, loops, rx, samples)
+    if noise_counts:  # circular white noise: the same before and after an I/Q exchange
+        rng = np.random.default_rng(seed)
+        sig = sig + noise_counts * (rng.standard_normal(sig.shape) + 1j * rng.standard_normal(sig.shape))
     i = np.rint(sig.real).astype("<i2").reshape(-1, N_SAMPLES // 2, 2)
     q = np.rint(sig.imag).astype("<i2").reshape(-1, N_SAMPLES // 2, 2)
     return np.concatenate([i, q], axis=-1).tobytes()  # I(n) I(n+1) Q(n) Q(n+1)
@@ -106,6 +110,7 @@ class Scene:
     mirror_doppler: bool = False  # carrier phase of the wrong sign (if_signal)
     x0_m: float = 0.0  # hand centre across boresight (radar x)
     rx_gains: tuple[float, ...] = (1.0,)  # one RX channel per entry, its amplitude factor (0: dead)
+    noise_counts: float = 0.0  # rms receiver noise on I and on Q (ADC counts), seeded by the repetition
     extra_meta: dict = field(default_factory=dict)
 
     def centre(self, t: np.ndarray) -> np.ndarray:
@@ -141,7 +146,8 @@ def write_recording(folder: Path, scene: Scene) -> Path:
     ranges = np.linalg.norm(scene.centre(chirp_times(scene.n_frames)), axis=-1)
     (folder / "adc_data.bin").write_bytes(adc_bytes(ranges, scene.amplitude, swap_iq=scene.swap_iq,
                                                               mirror_doppler=scene.mirror_doppler,
-                                                              rx_gains=scene.rx_gains))
+                                                              rx_gains=scene.rx_gains,
+                                                              noise_counts=scene.noise_counts, seed=scene.repetition))
     t = np.arange(scene.leap_span_s[0], scene.leap_span_s[1], 1 / scene.leap_rate_hz)
     joints = scene.joints(t)
     with (folder / "leap.jsonl").open("w") as fh:

@@ -389,16 +389,21 @@ def test_folders_with_known_answers_are_ingested_diagnosed_judged_and_resumed(tm
     """benchmark.folders: two folders of the same 8 recordings of the independent writer, whose one point
     reflector at the hand centre is what the palm effect adds (tests/gap/test_cli.py): listed with truth palm
     the answer is found; listed with truth noise, palm is a wrong cause, unless the manifest says every
-    folder carries palm. A third folder, Doppler-mirrored, is named with its fix. A second run resumes
-    every case: nothing is ingested or diagnosed again."""
-    for folder in ("a", "b", "mirrored"):
+    folder carries palm. Two more folders, with receiver noise, against the simulator's sign convention
+    are named with their fixes: Doppler-mirrored (doppler_flip) and I/Q-swapped (iq_swap, from the range
+    figure ingest carries into the dataset: the swapped rows' Doppler r is leakage and noise). A second
+    run resumes every case: nothing is ingested or diagnosed again."""
+    for folder in ("a", "b", "mirrored", "swapped"):
         for i in range(8):
             write_recording(tmp_path / "held_back" / folder / f"rec{i}",
                             Scene(gesture=("grasp", "circle")[i % 2], subject=f"s{i % 3}",
-                                  velocity_m_s=-0.08 - 0.02 * i, repetition=i, mirror_doppler=folder == "mirrored"))
+                                  velocity_m_s=-0.08 - 0.02 * i, repetition=i, mirror_doppler=folder == "mirrored",
+                                  swap_iq=folder == "swapped", noise_counts=30.0 if folder in ("mirrored", "swapped")
+                                  else 0.0))
     manifest = _folder_manifest(tmp_path, "folders:\n  palm_case: {root: a, truth: palm}\n"
                                           f"  noise_case: {{root: {tmp_path / 'held_back' / 'b'}, truth: noise}}\n"
-                                          "  flipped: {root: mirrored, truth: palm}\n")
+                                          "  flipped: {root: mirrored, truth: palm}\n"
+                                          "  swapped: {root: swapped, truth: palm}\n")
     cfg = OmegaConf.create({
         "task_name": "gap_benchmark", "progress": False, "skeleton_rate_hz": 100.0,
         "radar": {"_target_": "handradar.radar.config.RadarConfig.from_cfg_text", "text": radar.to_cfg(), "source": "test"},
@@ -416,12 +421,14 @@ def test_folders_with_known_answers_are_ingested_diagnosed_judged_and_resumed(tm
     assert (tmp_path / "results" / "folders-held_back_8.json").is_file()
     assert by["palm_case"]["cause"] == by["noise_case"]["cause"] == "palm"
     assert found(by["palm_case"]) and not wrong_cause(by["palm_case"]) and wrong_cause(by["noise_case"])
-    assert len(list((tmp_path / "cache" / "datasets").glob("recordings-*.h5"))) == 3  # each folder ingested
+    assert len(list((tmp_path / "cache" / "datasets").glob("recordings-*.h5"))) == 4  # each folder ingested
     # a folder against the simulator's sign convention is named with its fix
-    assert [by[c]["convention_fix"] for c in ("palm_case", "noise_case", "flipped")] == [None, None, "doppler_flip"]
+    assert [by[c]["convention_fix"] for c in ("palm_case", "noise_case", "flipped", "swapped")] == \
+        [None, None, "doppler_flip", "iq_swap"]
     md = (tmp_path / "run" / "gap_benchmark.md").read_text()
     assert f"listed in {manifest}" in md and "| noise_case | noise | palm | no |" in md
-    assert "sign convention** (re-ingest with the fix; the verdict is not the simulator's): flipped (doppler_flip=true)." in md
+    assert ("sign convention** (re-ingest with the fix; the verdict is not the simulator's): "
+            "flipped (doppler_flip=true), swapped (iq_swap=true).") in md
     assert "signature_mean" not in by["palm_case"]  # no effect-free twin: no truth side
     for h5 in (tmp_path / "cache" / "datasets").glob("recordings-*.h5"):
         h5.unlink()
@@ -429,6 +436,7 @@ def test_folders_with_known_answers_are_ingested_diagnosed_judged_and_resumed(tm
     again = json.loads(run_benchmark(cfg, tmp_path / "run2").read_text())
     assert not (tmp_path / "run2" / "cases").exists() and not list((tmp_path / "cache" / "datasets").glob("*.h5"))
     assert [c["cause"] for c in again["cases"][:2]] == ["palm", "palm"] and not wrong_cause(again["cases"][1])
+    assert [c["convention_fix"] for c in again["cases"][2:]] == ["doppler_flip", "iq_swap"]
 
 
 def test_case_folders_writes_the_benchmarks_case_worlds_and_a_manifest_the_folder_benchmark_reads(tmp_path):

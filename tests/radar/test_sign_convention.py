@@ -26,7 +26,7 @@ import torch
 from handradar.data.convention import range_mirror_db
 from handradar.radar.chain import gate_bins, measured_spectrogram, range_profiles_from_adc
 from handradar.radar.dca1000 import encode_adc, read_adc
-from handradar.radar.signal import beat_signal
+from handradar.radar.signal import beat_signal, doppler_mirror
 from handradar.sim.profiles import scatterer_profiles, window_chirp_times
 from handradar.sim.scatterers import Scatterers
 from handradar.world.render import synthesize_beat
@@ -42,9 +42,10 @@ def ramp_starts(radar, n_frames: int) -> np.ndarray:
 
 
 def literal_if(radar, n_frames: int, r0: float, v_away: float, amplitude: float = 2000.0,
-               swap_iq: bool = False) -> np.ndarray:
+               swap_iq: bool = False, mirror_doppler: bool = False) -> np.ndarray:
     """(frames, chirps, 1, samples) IF of a point target at r0 + v_away t (t from the capture start),
-    S_TX(t') conj(S_TX(t' - tau)) at t' = adcStart + n / fs after each ramp start."""
+    S_TX(t') conj(S_TX(t' - tau)) at t' = adcStart + n / fs after each ramp start. ``mirror_doppler``:
+    the carrier phase 2 pi tau (f0 + S adcStart) of the wrong sign, the fast-time tone kept."""
     def tx_cycles(t):
         return radar.start_freq_hz * t + 0.5 * radar.slope_hz_per_s * t ** 2
 
@@ -52,6 +53,8 @@ def literal_if(radar, n_frames: int, r0: float, v_away: float, amplitude: float 
     t_abs = ramp_starts(radar, n_frames)[..., None] + tp
     tau = 2 * (r0 + v_away * t_abs) / C
     sig = amplitude * np.exp(2j * np.pi * (tx_cycles(tp) - tx_cycles(tp - tau)))
+    if mirror_doppler:
+        sig = sig * np.exp(-4j * np.pi * tau * (radar.start_freq_hz + radar.slope_hz_per_s * radar.adc_start_time_s))
     if swap_iq:
         sig = sig.imag + 1j * sig.real
     return sig[:, :, None, :].astype(np.complex64)
@@ -145,3 +148,28 @@ def test_swapped_iq_puts_the_target_at_negative_range_bins_and_ingest_reads_it_b
     assert range_mirror_db(as_written, radar, np.array([0.4])) > 20
     assert range_mirror_db(read_adc(tmp_path / "a.bin", cfg, iq_swap=True), radar, np.array([0.4])) < -20
     np.testing.assert_allclose(read_adc(tmp_path / "a.bin", cfg, iq_swap=True), np.rint(good.real) + 1j * np.rint(good.imag))
+
+
+def test_doppler_flip_rights_a_mirrored_carrier_but_leaves_a_swapped_target_at_mirrored_bins(radar, chain):
+    """doppler_flip (handradar.radar.signal.doppler_mirror, each bin's windowed spectrum conjugated): on a
+    capture whose carrier phase has the wrong sign it gives back the literal IF's range profiles in
+    magnitude and in their chirp-to-chirp phase steps (the Doppler; the window's slowly moving linear
+    phase at a fractional beat bin is conjugated too). On an I/Q-swapped capture (j conj(x)) it rights
+    the slow-time phase but the target stays at bin N - b (there, -j times the right profile): the
+    Doppler of the leakage at bin b passes the check while the range figure still names the swap; only
+    iq_swap puts the target back at bin b."""
+    good = literal_if(radar, 2, 0.4, -0.3)
+    righted = profiles_of(doppler_mirror(literal_if(radar, 2, 0.4, -0.3, mirror_doppler=True)), radar, chain)
+    want = profiles_of(good, radar, chain)
+    assert rel_err(righted.abs(), want.abs()) < 0.02
+    steps = [p[:, 1:] * p[:, :-1].conj() for p in (righted, want)]  # chirp to chirp, per range bin
+    assert rel_err(*steps) < 0.02
+    assert rel_err(steps[0], steps[1].conj()) > 0.5  # the wrong sign would show: the Doppler is the step's phase
+    flipped = doppler_mirror(literal_if(radar, 2, 0.4, -0.3, swap_iq=True))
+    hann = torch.hann_window(radar.n_samples, periodic=True, dtype=torch.float64).numpy()
+    spec_good, spec_flipped = (np.fft.fft(x * hann, axis=-1) for x in (good, flipped))
+    b = round(2 * radar.slope_hz_per_s * 0.4 / C / radar.sample_rate_hz * radar.n_samples)
+    bins = np.arange(b - 2, b + 3)
+    mirrored = spec_flipped[..., radar.n_samples - bins]
+    assert rel_err(torch.as_tensor(mirrored), torch.as_tensor(-1j * spec_good[..., bins])) < 0.02
+    assert range_mirror_db(flipped, radar, np.array([0.4])) > 20 and range_mirror_db(good, radar, np.array([0.4])) < -20

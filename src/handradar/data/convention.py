@@ -9,8 +9,11 @@ anything is fitted (docs/architecture.md, "Sign convention"):
   clutter removal keeps the centroid of a still scene at zero). A strongly negative median means
   the rows are mirrored against the simulator (swapped I/Q, conjugated samples, a down-chirp). The
   lag that maximises it measures a clock offset between Leap and radar.
-- Range (raw ADC only): the hand's energy belongs at positive range bins near the skeleton's
-  range; the same energy at the mirrored bins N - b means I and Q are swapped.
+- Range (raw ADC only: ingest measures it and writes it into the dataset, where a check of the rows
+  alone reads it): the hand's energy belongs at positive range bins near the skeleton's range; the
+  same energy at the mirrored bins N - b means I and Q are swapped. A swap also mirrors the Doppler,
+  but the rows then hold window leakage and noise at the hand's range bins, whose r can fall anywhere
+  near 0: the range figure, not r, names the swap.
 
 Thresholds (docs/architecture.md, "Sign convention"): on independent noise one row's r spreads by
 about 1 / sqrt(32 columns) = 0.18, so a median of -0.3 over several rows is no accident.
@@ -92,13 +95,25 @@ def range_mirror_db(adc: np.ndarray, radar: RadarConfig, ranges_m: np.ndarray) -
     return float(10 * np.log10((power[n - bins].sum() + 1e-30) / (power[bins].sum() + 1e-30)))
 
 
+UNDETERMINED = "iq_swap or doppler_flip"  # Doppler mirrored, range bins not measured: the rows cannot say which
+
+
 @dataclass
 class ConventionCheck:
-    """Per-row figures and their summary; ``message()`` is the line a user reads."""
+    """Per-row figures and their summary; ``fix()`` names what to change, ``message()`` is what a user reads.
+
+    Two findings, each on its own figure: the range figure (the hand's energy at the mirrored range
+    bins, measured by ingest on the raw ADC) says whether I and Q are swapped; the Doppler r says
+    whether the Doppler is mirrored. A swap mirrors both, and the rows of a swapped capture hold only
+    window leakage and noise at the hand's own range bins, so their r says nothing (rows from -0.6 to
+    +0.6 with receiver noise): the range finding decides wherever it is measured. ``iq_swap``, ``doppler_flip``: the
+    ingest options the rows were read with (the fix turns the named one over)."""
 
     rows: list[str] = field(default_factory=list)
     r_by_lag: list[np.ndarray] = field(default_factory=list)  # each (len(LAGS_S),)
     mirror_db: list[float] = field(default_factory=list)  # NaN where no ADC was at hand
+    iq_swap: bool = False
+    doppler_flip: bool = False
 
     def add(self, name: str, r_by_lag: np.ndarray, mirror_db: float = math.nan) -> None:
         self.rows.append(name)
@@ -111,7 +126,8 @@ class ConventionCheck:
             return np.array([np.nanmedian(c) if np.isfinite(c).any() else np.nan for c in table.T])
 
     def summary(self) -> dict:
-        """median_r (lag 0), n_rows (rows with a defined r), best_lag_s and its median r, median mirror_db."""
+        """median_r (lag 0), n_rows (rows with a defined r), best_lag_s and its median r, median mirror_db
+        and n_range_rows (rows whose range figure was measured)."""
         zero = int(np.flatnonzero(LAGS_S == 0)[0])
         r0 = np.array([r[zero] for r in self.r_by_lag]) if self.r_by_lag else np.zeros(0)
         med = self._lag_medians()
@@ -123,39 +139,66 @@ class ConventionCheck:
             "median_r": float(np.nanmedian(r0)) if np.isfinite(r0).any() else None,
             "best_lag_s": float(LAGS_S[best]),
             "median_r_at_best_lag": float(med[best]) if np.isfinite(med[best]) else None,
+            "n_range_rows": int(finite.size),
             "median_range_mirror_db": float(np.median(finite)) if finite.size else None,
         }
 
     def to_json(self) -> dict:
-        """summary() and each row's r (lag 0) and range mirror (dB), None where undefined."""
+        """summary(), the reading options, fix() and each row's r (lag 0) and range mirror (dB), None where
+        undefined."""
         zero = int(np.flatnonzero(LAGS_S == 0)[0])
-        return {**self.summary(), "rows": {name: {"r": _finite(r[zero]), "range_mirror_db": _finite(m)}
-                                           for name, r, m in zip(self.rows, self.r_by_lag, self.mirror_db)}}
+        return {**self.summary(), "iq_swap": self.iq_swap, "doppler_flip": self.doppler_flip, "fix": self.fix(),
+                "rows": {name: {"r": _finite(r[zero]), "range_mirror_db": _finite(m)}
+                         for name, r, m in zip(self.rows, self.r_by_lag, self.mirror_db)}}
 
     def mirrored(self) -> bool:
+        """The Doppler r says the rows are mirrored (whatever the cause: see fix())."""
         s = self.summary()
         return s["median_r"] is not None and s["median_r"] < MIRRORED_BELOW_R
 
     def iq_swapped(self) -> bool:
+        """The range figure says the hand sits at the mirrored range bins: I and Q swapped as read."""
         s = self.summary()
         return s["median_range_mirror_db"] is not None and s["median_range_mirror_db"] > MIRRORED_RANGE_DB
 
-    def message(self) -> str:
-        """One line per finding: the figures, and what to do where something is off."""
-        s = self.summary()
-        if s["median_r"] is None:
-            return "sign convention: not checked (no row whose hand moves radially)"
-        lines = [f"sign convention: Doppler centroid vs skeleton approach speed r = {s['median_r']:+.2f} "
-                 f"(median of {s['n_rows']} rows)"
-                 + ("" if s["median_range_mirror_db"] is None else
-                    f"; hand energy at mirrored range bins {s['median_range_mirror_db']:+.0f} dB")]
+    def fix(self) -> str | None:
+        """The ingest option to turn over: "iq_swap" (the hand at mirrored range bins, whatever r says),
+        "doppler_flip" (Doppler mirrored, range bins measured right), UNDETERMINED (Doppler mirrored, range
+        bins not measured: either may be it), None (nothing found off)."""
         if self.iq_swapped():
-            lines.append("  the hand sits at negative range bins: I and Q are swapped (or the samples conjugated); "
-                         "re-ingest with iq_swap=true")
-        elif self.mirrored():
+            return "iq_swap"
+        if self.mirrored():
+            return "doppler_flip" if self.summary()["median_range_mirror_db"] is not None else UNDETERMINED
+        return None
+
+    def option(self, name: str) -> str:
+        """``name=value`` that turns the ingest option ``name`` over from the value the rows were read with."""
+        return f"{name}={'false' if getattr(self, name) else 'true'}"
+
+    def message(self) -> str:
+        """One line of figures, each finding on its own, then one line per thing to do."""
+        s = self.summary()
+        doppler = ("Doppler not checked (no row whose hand moves radially)" if s["median_r"] is None else
+                   f"Doppler centroid vs skeleton approach speed r = {s['median_r']:+.2f} "
+                   f"(median of {s['n_rows']} rows)")
+        rng = ("range bins not checked (no range figure: handradar-ingest measures it on the raw ADC)"
+               if s["median_range_mirror_db"] is None else
+               f"hand energy at mirrored range bins {s['median_range_mirror_db']:+.0f} dB")
+        lines = [f"sign convention: {doppler}; {rng}"]
+        fix = self.fix()
+        if fix == "iq_swap":
+            lines.append("  the hand sits at negative range bins: I and Q are swapped (or the samples conjugated), "
+                         "and the rows hold leakage, not the hand; re-ingest with " + self.option("iq_swap"))
+        elif fix == "doppler_flip":
             lines.append("  the rows are Doppler-mirrored against the simulator (range bins right): a down-chirp or a "
-                         "conjugated carrier phase; re-ingest with doppler_flip=true")
-        elif (abs(s["best_lag_s"]) >= LAG_REPORTED_S and s["median_r_at_best_lag"] is not None
+                         "conjugated carrier phase; re-ingest with " + self.option("doppler_flip"))
+        elif fix == UNDETERMINED:
+            lines.append("  the rows are Doppler-mirrored against the simulator, and without a range figure they "
+                         f"cannot tell I/Q swapped ({self.option('iq_swap')}) from a mirrored Doppler with range "
+                         f"bins right ({self.option('doppler_flip')}): ingest the recordings again "
+                         "(handradar-ingest or data=recordings), whose range check says which")
+        elif (s["median_r"] is not None and abs(s["best_lag_s"]) >= LAG_REPORTED_S
+                and s["median_r_at_best_lag"] is not None
                 and s["median_r_at_best_lag"] >= max(LAG_MIN_R, s["median_r"] + 0.05)):
             lines.append(f"  the skeleton best matches the radar {s['best_lag_s'] * 1e3:+.0f} ms later "
                          f"(r = {s['median_r_at_best_lag']:+.2f}): check radar_start_us in meta.json")

@@ -95,7 +95,7 @@ class RecordingsFolder:
                                  allow_truncated=self.allow_truncated, iq_swap=self.iq_swap,
                                  doppler_flip=self.doppler_flip, progress=False)
                 log.info("%s", summary.report())
-                if summary.convention.mirrored() or summary.convention.iq_swapped():
+                if summary.convention.fix():
                     log.warning("%s", summary.convention.message())
         return out.resolve()
 

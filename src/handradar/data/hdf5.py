@@ -5,7 +5,11 @@ Datasets: ``spectrograms`` (N, 64, 32) float32 in [0, 1]; ``labels`` (N,) int64;
 window; group ``meta`` with one (N,) array per label field. Extra datasets (not part of the
 contract, read by handradar itself): ``hand_mask`` (N, T, 2) bool, ``window_start_s`` (N,); group
 ``quality`` (written by ingest) with one (N,) array per quality field of handradar.data.quality
-(verdict, coverage, longest_gap_s, duplicate_of, ...), so that jobs can filter or weight rows.
+(verdict, coverage, longest_gap_s, duplicate_of, ...), so that jobs can filter or weight rows; group
+``convention`` (written by ingest) with ``range_mirror_db`` (N,), the hand's energy at the mirrored
+range bins over that at its own (dB, NaN where not measured; handradar.data.convention), and the
+file attributes ``iq_swap`` and ``doppler_flip``, the ingest options the rows were read with, so
+that a check of the rows alone can tell I/Q swapped from Doppler-mirrored.
 File attributes: ``format``, ``config_hash``, ``code_version``, ``classes`` (JSON list),
 ``radar_cfg`` (the radar.cfg text), ``chain`` (JSON), ``skeleton_rate_hz``.
 
@@ -31,6 +35,7 @@ from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
 
 FORMAT = "handradar.dataset/1"
+READ_OPTIONS = ("iq_swap", "doppler_flip")  # ingest's reading options, file attributes of the rows they read
 STR = h5py.string_dtype("utf-8")
 
 
@@ -44,6 +49,7 @@ class DatasetWriter:
 
     BLOCK = 64  # rows per write; the spectrograms' chunk
     COLUMNS = ("spectrograms", "labels", "skeletons", "hand_mask", "window_start_s")
+    GROUPS = ("quality", "convention")  # optional groups of (N,) columns, each written where a row gives it
 
     def __init__(self, h5: h5py.File, n_steps: int, spec_shape: tuple[int, int]) -> None:
         self.h5 = h5
@@ -61,14 +67,17 @@ class DatasetWriter:
         self._datasets = {name: h5[name] for name in self.COLUMNS}
         self._row_shapes = {name: ds.shape[1:] for name, ds in self._datasets.items()}
         self._pending: dict[str, list[np.ndarray]] = {name: [] for name in self.COLUMNS}
-        self.quality: dict[str, list] = {}
+        self.groups: dict[str, dict[str, list]] = {g: {} for g in self.GROUPS}
 
     def append(self, spectrogram: np.ndarray, label: int, skeleton: np.ndarray, hand_mask: np.ndarray,
-               window_start_s: float, meta: dict[str, object], *, quality: dict[str, object] | None = None) -> None:
+               window_start_s: float, meta: dict[str, object], *, quality: dict[str, object] | None = None,
+               convention: dict[str, object] | None = None) -> None:
         if self.n and set(meta) != set(self.meta):
             raise ValueError(f"meta fields {sorted(meta)} differ from the first row's {sorted(self.meta)}")
-        if self.n and set(quality or {}) != set(self.quality):
-            raise ValueError(f"quality fields {sorted(quality or {})} differ from the first row's {sorted(self.quality)}")
+        given = {"quality": quality or {}, "convention": convention or {}}
+        for g, fields in given.items():
+            if self.n and set(fields) != set(self.groups[g]):
+                raise ValueError(f"{g} fields {sorted(fields)} differ from the first row's {sorted(self.groups[g])}")
         rows = []
         for name, value in zip(self.COLUMNS, (spectrogram, label, skeleton, hand_mask, window_start_s)):
             row = np.array(value)  # a copy: the caller may reuse its buffer before the block is written
@@ -79,8 +88,9 @@ class DatasetWriter:
             self._pending[name].append(row)
         for k, v in meta.items():
             self.meta.setdefault(k, []).append(v)
-        for k, v in (quality or {}).items():
-            self.quality.setdefault(k, []).append(v)
+        for g, fields in given.items():
+            for k, v in fields.items():
+                self.groups[g].setdefault(k, []).append(v)
         self.n += 1
         if len(self._pending["labels"]) >= self.BLOCK:
             self._flush()
@@ -99,8 +109,9 @@ class DatasetWriter:
     def finish(self) -> None:
         self._flush()
         _write_columns(self.h5.create_group("meta"), self.meta)
-        if self.quality:
-            _write_columns(self.h5.create_group("quality"), self.quality)
+        for g, columns in self.groups.items():
+            if columns:
+                _write_columns(self.h5.create_group(g), columns)
 
 
 def _write_columns(g: h5py.Group, columns: dict[str, list]) -> None:
@@ -191,12 +202,27 @@ def read_meta_group(path: str | Path, group: str = "meta") -> dict[str, np.ndarr
         return out
 
 
+def read_optional_group(path: str | Path, group: str) -> dict[str, np.ndarray]:
+    """An optional group of (N,) columns (``quality``, ``convention``) as numpy arrays; {} where the file has none."""
+    with h5py.File(path, "r") as h5:
+        if group not in h5:
+            return {}
+    return read_meta_group(path, group)
+
+
 def read_quality_group(path: str | Path) -> dict[str, np.ndarray]:
     """The per-row ``quality`` fields that ingest writes (handradar.data.quality); {} where the file has none."""
+    return read_optional_group(path, "quality")
+
+
+def read_convention(path: str | Path) -> tuple[np.ndarray | None, dict[str, bool]]:
+    """The rows' range figure ``convention/range_mirror_db`` ((N,) dB, NaN where not measured; None where
+    the file has none) and the ingest options they were read with (``iq_swap``, ``doppler_flip``; False
+    where the file does not say)."""
+    figure = read_optional_group(path, "convention").get("range_mirror_db")
     with h5py.File(path, "r") as h5:
-        if "quality" not in h5:
-            return {}
-    return read_meta_group(path, "quality")
+        options = {k: bool(h5.attrs.get(k, False)) for k in READ_OPTIONS}
+    return (None if figure is None else np.asarray(figure, np.float64)), options
 
 
 def validate(path: str | Path) -> int:
@@ -232,6 +258,8 @@ def validate(path: str | Path) -> int:
                 raise FormatError(path, f"meta/{k} must have shape ({n},), found {getattr(ds, 'shape', 'a group')}")
         if "quality" in h5:
             _validate_quality(path, h5["quality"], n)
+        if "convention" in h5:
+            _validate_convention(path, h5["convention"], n)
         for k in ("config_hash", "code_version"):
             if k not in h5.attrs:
                 raise FormatError(path, f"missing attribute {k!r}")
@@ -252,3 +280,11 @@ def _validate_quality(path: Path, group: object, n: int) -> None:
             a = ds[()]
             if a.dtype.kind != "f" or np.any((a < 0) | (a > 1)):
                 raise FormatError(path, f"quality/{k} must be shares in [0, 1] (float; NaN where not measured)")
+
+
+def _validate_convention(path: Path, group: object, n: int) -> None:
+    """The optional ``convention`` group: ``range_mirror_db``, (N,) float (NaN: not measured)."""
+    figure = group.get("range_mirror_db") if isinstance(group, h5py.Group) else None
+    if not isinstance(figure, h5py.Dataset) or figure.shape != (n,) or figure.dtype.kind != "f":
+        raise FormatError(path, f"convention/range_mirror_db must be ({n},) float (dB; NaN where not measured), "
+                                f"found {getattr(figure, 'shape', None)} {getattr(figure, 'dtype', '')}")

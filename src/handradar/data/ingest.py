@@ -199,7 +199,9 @@ def ingest(root: str | Path, out: str | Path | None, chain: ChainConfig, *, skel
     skipped with the fields and both values. iq_swap, doppler_flip: read captures whose I and Q are
     exchanged, or whose Doppler runs mirrored (handradar.data.convention says which). The sign-
     convention figures of every row go into the summary and, as JSON, beside ``out``
-    (``<out stem>.checks.json``).
+    (``<out stem>.checks.json``); each row's range figure and the two options also into the dataset
+    (group ``convention``, file attributes ``iq_swap`` and ``doppler_flip``), where a check of its rows
+    alone finds them.
 
     Every recording passes the quality gate (handradar.data.quality): one that cannot carry a
     gesture is skipped with the measured figure, a doubtful one is kept and named; the report goes
@@ -216,7 +218,8 @@ def ingest(root: str | Path, out: str | Path | None, chain: ChainConfig, *, skel
     root = Path(root)
     if out is not None:
         refuse_output_inside(out, root, folders)
-    summary = IngestSummary(found=len(folders) + len(found.unreadable) + len(found.repeats), check=check)
+    summary = IngestSummary(found=len(folders) + len(found.unreadable) + len(found.repeats), check=check,
+                            convention=ConventionCheck(iq_swap=iq_swap, doppler_flip=doppler_flip))
     if not folders:
         unread = "".join(f"; cannot read {printable(str(f))}: {why}" for f, why in found.unreadable[:3])
         raise FormatError(root, f"no recordings found (no folder with a meta.json or other recording files){unread}")
@@ -295,7 +298,8 @@ def ingest(root: str | Path, out: str | Path | None, chain: ChainConfig, *, skel
             duplicates.add(name_of(folder), folder, *keys)
             labels = rec.meta.labels()
             labels["recording"] = name_of(folder)
-            summary.convention.add(labels["recording"], *convention_of(rec, ex, chain))
+            r_by_lag, mirror_db = convention_of(rec, ex, chain)
+            summary.convention.add(labels["recording"], r_by_lag, mirror_db)
             summary.written += 1
             if check:
                 continue
@@ -304,14 +308,17 @@ def ingest(root: str | Path, out: str | Path | None, chain: ChainConfig, *, skel
                 n_steps = skeleton_steps(chain, radar, skeleton_rate_hz)
                 writer = stack.enter_context(open_writer(
                     out, classes=GESTURES, radar=radar, chain=chain, skeleton_rate_hz=skeleton_rate_hz,
-                    n_steps=n_steps, config_hash=config_hash(radar, chain, skeleton_rate_hz, "ingest")))
+                    n_steps=n_steps, config_hash=config_hash(radar, chain, skeleton_rate_hz, "ingest"),
+                    extra_attrs={"iq_swap": iq_swap, "doppler_flip": doppler_flip}))
+            # the range figure travels with the row: a check of the dataset alone cannot measure it
             writer.append(ex.spectrogram, rec.meta.label, ex.skeleton.positions, ex.skeleton.mask,
-                          ex.window_start_s, labels, quality=quality.row_fields())
+                          ex.window_start_s, labels, quality=quality.row_fields(),
+                          convention={"range_mirror_db": mirror_db})
         if check:
             return summary
         if writer is None:
             raise FormatError(root, f"none of the {len(folders)} recordings could be ingested:\n{summary.report()}")
-    checks = {"convention": {**summary.convention.to_json(), "iq_swap": iq_swap, "doppler_flip": doppler_flip},
+    checks = {"convention": summary.convention.to_json(),
               "quality": summary.quality.to_json(), "skipped": dict(summary.skipped)}
     atomic_write_text(checks_path(out), json.dumps(checks, indent=1) + "\n")  # after the dataset is complete
     return summary

@@ -69,7 +69,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from handradar.atomic import atomic_write_text
 from handradar.config import read_yaml
-from handradar.data.convention import ConventionCheck
+from handradar.data.convention import UNDETERMINED
 from handradar.data.datasets import RecordingsFolder
 from handradar.errors import FormatError, HandradarError
 from handradar.gap.data import load_dataset
@@ -281,11 +281,6 @@ class FolderCases:
         return RecordingsFolder(self.roots[case.name], chain, cache_dir, skeleton_rate_hz=skeleton_rate_hz)
 
 
-def convention_fix(check: ConventionCheck) -> str | None:
-    """The ingest option that puts a folder's rows in the simulator's sign convention (None: they are)."""
-    return "iq_swap" if check.iq_swapped() else "doppler_flip" if check.mirrored() else None
-
-
 def score(results: Sequence[Mapping]) -> dict:
     """Confusion matrix (cases x attributions), named (top-1 correct), found (:func:`found`), wrong causes,
     inconclusive count, mean gap_closed of the withheld effects."""
@@ -480,6 +475,9 @@ def _attributed(r: Mapping) -> str:
 
 def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, settings: Mapping) -> str:
     sgn = functools.partial(fmt_number, signed=True)  # gap_closed figures carry their sign
+    # a folder's ingest option to turn on (folders are ingested with both off); UNDETERMINED: either
+    fixes = {r["case"]: "iq_swap=true or doppler_flip=true" if r["convention_fix"] == UNDETERMINED
+             else f"{r['convention_fix']}=true" for r in results if r.get("convention_fix")}
     rows_are = (f"Each row is a folder of recordings listed in {settings['manifest']} with its known answer (truth), "
                 "diagnosed by the paper's simulator; a control's right answer is `none`; effects every folder carries "
                 "(also present) are never a wrong cause. " if settings.get("manifest") else
@@ -504,9 +502,8 @@ def results_markdown(results: Sequence[Mapping], scores: Mapping, figure: str, s
                f"{sgn(s['after_gap_closed'])} of the gap; the world's own change on the simulator closes "
                f"{sgn(s.get('reference_gap_closed'))}.\n" for s in scores.get("several", [])],
              *([f"**Against the simulator's sign convention** (re-ingest with the fix; the verdict is not the "
-                "simulator's): " + ", ".join(f"{r['case']} ({r['convention_fix']}=true)" for r in results
-                                             if r.get("convention_fix")) + ".\n"]
-               if any(r.get("convention_fix") for r in results) else []),
+                "simulator's): " + ", ".join(f"{case} ({fix})" for case, fix in fixes.items()) + ".\n"]
+               if fixes else []),
              "`radar signature` is 1 - SSIM between the case's spectrograms and the effect-free world's, row by row "
              "over the same window of each recording (mean / median): how visible the withheld effect is in the radar "
              "data at all. `world's change on the simulator` is the gap_closed [95 % CI] of the diagnosis's baseline "
@@ -586,7 +583,7 @@ def run_benchmark(cfg: DictConfig, out_dir: str | Path) -> Path:
             write_outputs(diagnosis, out / "cases" / case.name, data.radar, data.chain, str(path))
             res = _case_result(case, diagnosis.report, time.perf_counter() - t0, len(data))
             if recordings:  # another source's folder may break the sign convention: its verdict is not the simulator's
-                res["convention_fix"] = convention_fix(check_convention(data))
+                res["convention_fix"] = check_convention(data).fix()
             else:
                 clean = clean or worlds.clean()
                 res.update(truth_side(worlds, path, clean, baseline=diagnosis.baseline, rows=diagnosis.evaluation,

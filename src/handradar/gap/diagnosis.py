@@ -50,7 +50,9 @@ effect at its own fitted values; which effect is chosen is decided on the out-of
 from all N rows: step 0 fitted once more, each candidate's grid scores pooled over the folds
 (handradar.gap.fit.pool_fits; refitted with ``refine_steps``); each fold's own are ``fold_params`` per candidate and
 ``baseline.calibration.folds``. Not cross-fitted: the RadarWeightNet readout (step 5) trains on the
-other folds of fold 0 and is scored on fold 0's rows only (``radarweightnet.evaluation_rows``).
+other folds of one fold and is scored on that fold's rows only (``radarweightnet.fold``, ``evaluation_rows``):
+fold 0, or the first fold with the 2 held-out rows its bootstrap needs; where no fold has them (one
+gesture, no more recordings than folds) it is skipped, and the report's ``skipped`` says why.
 Report convention: ``n_evaluation`` = N; ``n_calibration`` = the fewest rows any fold's fits saw
 (N minus the largest fold). With folds = 1 nothing of this applies: the diagnosis is the single split
 above, number for number. The default, folds = "auto" (:func:`resolve_folds`), cross-fits at every
@@ -327,6 +329,29 @@ def _subset(labels: np.ndarray, idx: np.ndarray, n: int | None, seed: int) -> np
     return idx[keep]
 
 
+READOUT_MIN_ROWS = 2  # the readout's paired bootstrap of gap_closed resamples at least 2 held-out rows
+
+
+def readout_fold(held_out: Sequence[int]) -> int | None:
+    """The fold that scores the RadarWeightNet readout, from each scored fold's count of held-out rows: the
+    first with at least READOUT_MIN_ROWS (fold 0 wherever it has them); None where no fold has."""
+    return next((i for i, n in enumerate(held_out) if n >= READOUT_MIN_ROWS), None)
+
+
+def fold_positions(held_out: Sequence[int], k: int) -> np.ndarray:
+    """Positions of scored fold ``k``'s rows in the evaluation arrays, which hold the scored folds' rows
+    fold after fold (``held_out``: each fold's count)."""
+    start = int(sum(held_out[:k]))
+    return np.arange(start, start + held_out[k])
+
+
+def readout_skip_reason(held_out: Sequence[int]) -> str:
+    """Why the readout is skipped where :func:`readout_fold` finds no fold (the report's ``skipped``)."""
+    return (f"no fold holds the {READOUT_MIN_ROWS} held-out rows its paired-bootstrap CI needs (the {len(held_out)} "
+            f"folds hold {', '.join(map(str, held_out))}); record a second gesture, or more than {len(held_out)} "
+            "recordings of one")
+
+
 AUTO = "auto"
 # folds = "auto" (the default): cross-fitting at every size, in AUTO_FOLDS_SMALL folds below
 # AUTO_SMALL_BELOW_ROWS rows and AUTO_FOLDS from there. A false cause is the worst answer the diagnosis
@@ -358,8 +383,9 @@ def cross_folds(labels: np.ndarray, k: int, seed: int) -> list[np.ndarray]:
     if k < 2:
         raise ValueError(f"cross-fitting needs at least 2 folds, found {k}")
     if k > counts.min():
-        raise ValueError(f"diagnose.folds = {k} exceeds the {counts.min()} rows of class {classes[counts.argmin()]!r}: "
-                         f"every fold must hold every class (use at most {counts.min()} folds)")
+        smallest = classes[counts.argmin()].item()
+        raise ValueError(f"diagnose.folds = {k} exceeds the {counts.min()} rows of class {smallest!r}: every fold"
+                         f" must hold every class (use at most {counts.min()} folds)")
     return stratified_partition(labels, [1.0 / k] * k, seed, every_part=True)
 
 
@@ -369,19 +395,19 @@ def check_rows(labels: np.ndarray, folds: int | str, calibration_fraction: float
     each gesture (cross-fitting then scores every row); one split (folds = 1) needs more."""
     labels = np.asarray(labels)
     k = resolve_folds(folds, labels)
+    minimum = ("too few rows to diagnose: the diagnosis needs at least 2 rows of each gesture (with diagnose.folds="
+               "auto; one calibration/evaluation split needs 1 calibration and 2 evaluation rows)")
     try:
         parts = (stratified_partition(labels, (calibration_fraction, 1.0 - calibration_fraction), seed,
                                       every_part=True) if k == 1 else cross_folds(labels, k, seed))
     except ValueError as exc:  # fewer rows than parts, or a class smaller than the folds asked for
-        raise TooFewRows(f"too few rows to diagnose: {exc}; the data hold {class_counts(labels)}") from None
+        raise TooFewRows(f"{minimum}; the data hold {class_counts(labels)}: {exc}") from None
     n_eval = len(parts[-1]) if k == 1 else len(labels)
     n_cal = len(parts[0]) if k == 1 else len(labels) - max(len(p) for p in parts)
     if n_eval >= 2 and n_cal >= 1:
         return
-    raise TooFewRows(f"too few rows to diagnose: the diagnosis needs at least 2 rows of each gesture (with "
-                     f"diagnose.folds=auto; one calibration/evaluation split needs 1 calibration and 2 evaluation "
-                     f"rows); the data hold {class_counts(labels)}, which leave {n_cal} calibration and {n_eval} "
-                     f"evaluation rows with folds={folds}")
+    raise TooFewRows(f"{minimum}; the data hold {class_counts(labels)}, which leave {n_cal} calibration and "
+                     f"{n_eval} evaluation rows with folds={folds}")
 
 
 def _bar(total: int, desc: str, enabled: bool):
@@ -505,6 +531,8 @@ class _Steps:
         self.features: BoneFeatures | None = None
         self.features_exponent = 1.0
         self.profiles: SlotProfileCache | None = None
+        self.rwn_index: int | None = None  # the scored fold of the RadarWeightNet readout (None: not run)
+        self.skipped: dict[str, str] = {}  # step -> why it did not run (the report's ``skipped``)
         self.runner = _Runner(data, cfg, progress)
         # every engine of the diagnosis shares it: the folds' fits and predictions overlap (engine doc)
         self.spectrograms = SpectrogramCache()
@@ -623,18 +651,24 @@ class _Steps:
     def cache(self) -> None:
         """Bone features and the readout fold's baseline slot profiles, where the later steps need them."""
         cfg, d = self.cfg, self.data
-        self.rwn_fold = self.scored[0]  # the RadarWeightNet readout's split (the single split, or fold 0)
-        sim = self.rwn_fold.build(self.rwn_fold.base)
+        held_out = [len(f.test) for f in self.scored]
+        self.rwn_index = readout_fold(held_out) if cfg.radarweightnet else None  # the single split, or a fold
+        if cfg.radarweightnet and self.rwn_index is None:
+            self.skipped["radarweightnet"] = readout_skip_reason(held_out)
+            log.warning("RadarWeightNet readout skipped: %s", self.skipped["radarweightnet"])
+        readout = self.rwn_index is not None
+        fold = self.scored[self.rwn_index or 0]
+        sim = fold.build(fold.base)
         # RadarWeightNet reads the RCS at the calibrated exponent; visibility alone does not depend on it
-        stale = self.features is None or (cfg.radarweightnet and self.features_exponent != sim.rcs_exponent)
-        if ("occlusion" in self.names or cfg.radarweightnet) and stale:
+        stale = self.features is None or (readout and self.features_exponent != sim.rcs_exponent)
+        if ("occlusion" in self.names or readout) and stale:
             self.bone_features(sim)
-        if cfg.radarweightnet:
+        if readout:
             vis = d.rows.visibility if "occlusion" in self.base else None
             self.profiles = SlotProfileCache(cache_slot_profiles(
                 sim, d.rows.skeletons, d.rows.masks, self.cache_dir, times=d.rows.times, visibility=vis,
                 progress=self.progress))
-            self.rwn_fold.profiles = self.profiles.profiles
+            fold.profiles = self.profiles.profiles
 
     def which(self) -> None:
         """Every candidate fitted per fold and scored on its held-out rows; the cause."""
@@ -719,6 +753,7 @@ class _Steps:
                        "after": self.after,
                        "evidence": self.evidence,
                        "excluded": self.runner.excluded,
+                       "skipped": self.skipped,
                        "selection": self.selection,
                        "settings": {"seed": cfg.seed, "calibration_fraction": cfg.calibration_fraction,
                                     "folds": cfg.folds, "fit_rows": int(len(self.folds[-1].fit_idx)),
@@ -738,20 +773,24 @@ class _Steps:
 
     def readout(self) -> None:
         """How much a RadarWeightNet trained on the readout fold's training rows closes on its held-out
-        rows (handradar.gap.rwn); with folds, fold 0's, against the candidates at fold 0's fits."""
-        cfg, f = self.cfg, self.rwn_fold
+        rows (handradar.gap.rwn); with folds, the first fold with READOUT_MIN_ROWS held-out rows
+        (:func:`readout_fold`), against the candidates at that fold's fits. Skipped (the report's
+        ``skipped``) where no fold has them."""
+        cfg, k = self.cfg, self.rwn_index
         self.rwn_spec = self.rwn_rows = None
-        if cfg.radarweightnet and self.features is not None and self.profiles is not None:
-            pos = np.arange(len(f.test))  # the readout fold's rows come first in the evaluation arrays
-            cands = self.cands if len(self.folds) == 1 else [
-                c.on_rows(pos, self.before_ssim, c.fold_params[0]) for c in self.cands]
-            train_idx = _subset(self.data.labels, f.train, cfg.rwn_rows, cfg.seed + 3)
-            self.report["radarweightnet"], self.rwn_spec = rwn_readout(
-                self.data, f.build, f.base, self.features, self.profiles, train_idx, f.test, self.before_ssim[pos],
-                cands, cfg, progress=self.progress)
-            if len(self.folds) > 1:
-                self.report["radarweightnet"]["evaluation_rows"] = int(len(f.test))
-            self.rwn_rows = pos
+        if k is None:
+            return
+        f = self.scored[k]
+        pos = fold_positions([len(s.test) for s in self.scored], k)
+        cands = self.cands if len(self.folds) == 1 else [
+            c.on_rows(pos, self.before_ssim, c.fold_params[k]) for c in self.cands]
+        train_idx = _subset(self.data.labels, f.train, cfg.rwn_rows, cfg.seed + 3)
+        self.report["radarweightnet"], self.rwn_spec = rwn_readout(
+            self.data, f.build, f.base, self.features, self.profiles, train_idx, f.test, self.before_ssim[pos],
+            cands, cfg, progress=self.progress)
+        if len(self.folds) > 1:
+            self.report["radarweightnet"].update(fold=k, evaluation_rows=int(len(f.test)))
+        self.rwn_rows = pos
 
 
 # The diagnosis, in order; each is a method of _Steps, and its wall time is reported under its name.

@@ -20,6 +20,7 @@ Public API:
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -97,15 +98,17 @@ def headline_metrics(report: dict) -> dict[str, float]:
 
 def check_convention(data: GapData) -> ConventionCheck:
     """Step 0, before anything is fitted: do the rows follow the simulator's sign convention? (each
-    row's Doppler centroid against its own skeleton; handradar.data.convention). Logged; a warning
-    names the fix where the rows are mirrored."""
-    check = ConventionCheck()
+    row's Doppler centroid against its own skeleton, and the range figure ingest measured on its raw
+    ADC where the dataset carries it; handradar.data.convention). Logged; a warning names the fix
+    (or says that the rows cannot tell which) where something is off."""
+    check = ConventionCheck(**data.read_options)
     rows = data.rows
     for i in range(len(data)):
         check.add(str(i), check_row(data.measured[i], rows.skeletons[i], rows.masks[i], rows.times,
-                                    data.radar, data.chain))
+                                    data.radar, data.chain),
+                  math.nan if data.range_mirror_db is None else data.range_mirror_db[i])
     # ingest's line (if it ran) correlates over each recording's whole skeleton; this one over the rows' windows
-    (log.warning if check.mirrored() else log.info)("diagnosed rows' %s", check.message())
+    (log.warning if check.fix() else log.info)("diagnosed rows' %s", check.message())
     return check
 
 

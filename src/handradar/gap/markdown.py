@@ -7,6 +7,10 @@ from pathlib import Path
 from handradar.runs.tables import fmt_number
 
 
+# the report's ``skipped`` keys as a reader names the step
+STEP_NAMES = {"radarweightnet": "RadarWeightNet readout"}
+
+
 def _params(p: dict) -> str:
     return ", ".join(f"{k}={v:.4g}" for k, v in p.items()) or "-"
 
@@ -105,9 +109,11 @@ def render(report: dict, figures: dict[str, Path], out_dir: Path, source: str = 
             for s in steps))
     rwn = report.get("radarweightnet")
     if rwn:
-        on = (f", scored on the {rwn['evaluation_rows']} held-out rows of fold 0" if "evaluation_rows" in rwn else "")
+        on = (f", scored on the {rwn['evaluation_rows']} held-out rows of fold {rwn.get('fold', 0)}"
+              if "evaluation_rows" in rwn else "")
         lines.append(f"- RadarWeightNet readout ({rwn['train_rows']} training rows{on}): gap closed "
                      f"{fmt_number(rwn['gap_closed'], signed=True)} {_ci(rwn['ci95'])}")
+    lines += [f"- Skipped: the {STEP_NAMES.get(step, step)}: {why}" for step, why in report.get("skipped", {}).items()]
     lines.append("")
     if "examples" in rel:
         lines += [f"![examples]({rel['examples']})", ""]

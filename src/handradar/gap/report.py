@@ -107,6 +107,9 @@ def validate_report(report: dict, *, n_doppler: int = 64, n_columns: int = 32) -
         if needed is not None and (not isinstance(needed, int) or isinstance(needed, bool) or needed < 1):
             raise ReportError(f"evidence.recordings_needed of an inconclusive cause must be a positive integer "
                               f"or null, found {needed!r}")
+    skipped = report.get("skipped", {})
+    if not isinstance(skipped, dict) or not all(isinstance(v, str) and v for v in skipped.values()):
+        raise ReportError(f"skipped must map each skipped step to its reason (text), found {skipped!r}")
     after = report.get("after")
     _scores(after, "after")
     _number(after, "gap_closed", "after")
