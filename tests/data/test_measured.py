@@ -1,5 +1,5 @@
 """Measured spectrogram datasets through their manifest alone (handradar.data.measured), and the
-measured job's split (handradar.tasks.measured)."""
+measured job's split (handradar.data.splits.measured_split)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import yaml
 from handradar.data.datasets import load_arrays
 from handradar.data.hdf5 import read_attrs, validate
 from handradar.data.measured import MeasuredDataset, read_manifest
+from handradar.data.splits import measured_split
 from handradar.errors import FormatError
-from handradar.tasks.measured import measured_split
 
 SHARED_XIA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "xia2021"
 CLASSES = {"wave": ["swipe_left", "swipe_right"], "poke": ["push"], "still": ["idle"]}

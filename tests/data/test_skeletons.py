@@ -29,7 +29,8 @@ def _check_radar_frame(item, centre=(0.0, 0.0, 0.30)):
 
 
 def test_registry_names():
-    assert set(SOURCES) == {"sfinge3d", "dhg", "leap"}
+    assert set(SOURCES) == {"sfinge3d", "dhg", "leap", "motions"}
+    assert source_classes("motions", classes={"b": ["tap"], "a": ["push"]}) == ("b", "a")  # the mapping's order
     assert source_classes("sfinge3d") == SFINGE_CLASSES and len(SFINGE_CLASSES) == 13
     assert source_classes("dhg", n_classes=28) == GESTURES_28
     assert source_classes("leap") == GESTURES

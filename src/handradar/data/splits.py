@@ -13,7 +13,8 @@ Every split is a :class:`Split` of row indices into one dataset file:
 Sampling is stratified by class: each class gets ``max(1, round(fraction * n_class))`` rows, taken
 as a prefix of a per-class permutation seeded by ``(seed, class)``. Prefixes make the few-shot sets
 of one seed nested (the 5 % rows are among the 20 % rows) and a class's draw independent of which
-other classes exist.
+other classes exist. A measured dataset's rows split by its manifest's splits (:func:`measured_split`):
+validation rows of its training split, then K training rows per class.
 """
 
 from __future__ import annotations
@@ -242,3 +243,23 @@ def make_split(spec: dict, labels: np.ndarray, meta: dict[str, np.ndarray], seed
                                      fraction=float(spec.get("fraction", 1.0)),
                                      test_fraction=float(spec.get("test_fraction", 0.5))), labels, spec)
     raise ValueError(f"split kind must be 'few_shot' or 'ood', found {kind!r}")
+
+
+def measured_split(labels: np.ndarray, splits: np.ndarray, *, train: str, per_class: int | str, val_per_class: int,
+                   seed: int, test_seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(training rows, validation rows) of the ``train`` split: ``val_per_class`` rows per class drawn with
+    ``test_seed`` (the same for every seed and K), then ``per_class`` of the rest drawn with ``seed``, nested
+    across K (``all``: every one); a class left with no validation or training row is an error."""
+    train_rows, val_rows = [], []
+    pool = np.flatnonzero(splits == train)
+    for c in np.unique(labels[pool]):
+        members = np.sort(pool[labels[pool] == c])
+        val = _class_permutation(members, test_seed, c)[:val_per_class]
+        rest = np.setdiff1d(members, val)
+        if len(val) < val_per_class or (per_class != 0 and not len(rest)):
+            raise TooFewRows(f"class {c} has {len(members)} rows in split {train!r}: too few for {val_per_class} "
+                             "validation rows and at least 1 training row (split.val_per_class)")
+        k = len(rest) if per_class == "all" else int(per_class)
+        train_rows.append(_class_permutation(rest, seed, c)[:k])
+        val_rows.append(val)
+    return np.sort(np.concatenate(train_rows)), np.sort(np.concatenate(val_rows))

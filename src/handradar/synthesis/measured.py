@@ -144,6 +144,11 @@ class UnknownsFit:
     ranges: dict[str, list]         # numeric unknown -> [2.5 %, 97.5 %] of the bootstrap's chosen values
     n_rows: int
 
+    @classmethod
+    def from_dict(cls, d: Mapping) -> UnknownsFit:
+        """The fit :meth:`as_dict` wrote (the cached ``measured-fit-<hash>.json``)."""
+        return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows")})
+
     def as_dict(self) -> dict:
         return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
                 "n_rows": self.n_rows, "objective": "1 - SSIM of class-mean images, mean over classes"}

@@ -33,8 +33,8 @@ from omegaconf import OmegaConf
 from handradar.atomic import atomic_write_text
 from handradar.data.datamodule import FileRows
 from handradar.data.datasets import load_arrays
-from handradar.data.splits import _class_permutation
-from handradar.errors import FormatError, TooFewRows
+from handradar.data.splits import measured_split
+from handradar.errors import FormatError
 from handradar.gap.unpaired import write_unpaired_gap
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import config_hash
@@ -53,26 +53,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 MEASURED_VARIANTS = ("radar_only", "model_synth", "model_synth_only", "synth_pretrain")
-
-
-def measured_split(labels: np.ndarray, splits: np.ndarray, *, train: str, per_class: int | str, val_per_class: int,
-                   seed: int, test_seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """(training rows, validation rows) of the ``train`` split: ``val_per_class`` rows per class drawn with
-    ``test_seed`` (the same for every seed and K), then ``per_class`` of the rest drawn with ``seed``, nested
-    across K (``all``: every one); a class left with no validation or training row is an error."""
-    train_rows, val_rows = [], []
-    pool = np.flatnonzero(splits == train)
-    for c in np.unique(labels[pool]):
-        members = np.sort(pool[labels[pool] == c])
-        val = _class_permutation(members, test_seed, c)[:val_per_class]
-        rest = np.setdiff1d(members, val)
-        if len(val) < val_per_class or (per_class != 0 and not len(rest)):
-            raise TooFewRows(f"class {c} has {len(members)} rows in split {train!r}: too few for {val_per_class} "
-                             "validation rows and at least 1 training row (split.val_per_class)")
-        k = len(rest) if per_class == "all" else int(per_class)
-        train_rows.append(_class_permutation(rest, seed, c)[:k])
-        val_rows.append(val)
-    return np.sort(np.concatenate(train_rows)), np.sort(np.concatenate(val_rows))
 
 
 def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
@@ -116,12 +96,10 @@ def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
 
         log.info("fitting %s on %d measured rows (unpaired: class means)",
                  ", ".join(k for k, v in grid.items() if len(v) > 1), len(fit_rows))
-        result: UnknownsFit = fit_unknowns(job.real.x[fit_rows], job.real.y[fit_rows], n_classes, simulate, grid,
-                                           n_boot=int(fit["n_boot"]), seed=int(fit["seed"]))
-        result = result.as_dict()
+        result = fit_unknowns(job.real.x[fit_rows], job.real.y[fit_rows], n_classes, simulate, grid,
+                              n_boot=int(fit["n_boot"]), seed=int(fit["seed"])).as_dict()
         atomic_write_text(out, json.dumps(result, indent=1))
-    log.info("fitted: %s", UnknownsFit(**{k: result[k] for k in ("values", "candidates", "shares", "ranges",
-                                                                    "n_rows")}).summary())
+    log.info("fitted: %s", UnknownsFit.from_dict(result).summary())
     job.tracker.log_params({f"synth.fitted.{k}": v for k, v in result["values"].items()})
     job.tracker.log_artifact(out, "synthesis")
     return result["values"]
