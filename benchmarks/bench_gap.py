@@ -35,7 +35,8 @@ from benchmarks.common import Result, best_time
 from handradar.config import VERSION_BASE, config_dir
 from handradar.data.ingest import ingest
 from handradar.gap.data import load_dataset
-from handradar.gap.diagnosis import AUTO_SMALL_BELOW_ROWS, diagnose
+from handradar.gap.diagnosis import diagnose
+from handradar.gap.folds import AUTO_SMALL_BELOW_ROWS
 from handradar.provenance import REPO_ROOT
 from handradar.sim.factory import SimFactory
 

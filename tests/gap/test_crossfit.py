@@ -16,10 +16,9 @@ from handradar.gap.diagnosis import (
     Diagnosis,
     DiagnosisConfig,
     _evidence,
-    cross_folds,
     diagnose,
-    resolve_folds,
 )
+from handradar.gap.folds import cross_folds, resolve_folds
 from handradar.gap.fit import GridFit
 from handradar.gap.job import write_outputs
 from handradar.gap.report import validate_report

@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from handradar.errors import TooFewRows
-from handradar.gap.diagnosis import (
+from handradar.gap.folds import (
     check_rows,
     cross_folds,
     fold_positions,

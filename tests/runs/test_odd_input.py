@@ -23,7 +23,7 @@ from handradar.data.datasets import RecordingsFolder
 from handradar.data.ingest import ingest
 from handradar.data.splits import make_split
 from handradar.errors import TooFewRows, UsageError
-from handradar.gap.diagnosis import check_rows
+from handradar.gap.folds import check_rows
 from handradar.gap.job import run as diagnose_run
 from handradar.runs.cli import bool_option, run_cli, shell_quoted, unparsable_override
 from handradar.tasks.train import run as train_run

@@ -50,7 +50,7 @@ class GapData:
 
 def load_dataset(path: str | Path) -> GapData:
     """Every row of a dataset file: spectrograms, skeleton windows, labels, meta, radar and chain (the
-    diagnosis's own check, handradar.gap.diagnosis.check_rows, says whether they are enough)."""
+    diagnosis's own check, handradar.gap.folds.check_rows, says whether they are enough)."""
     path = Path(path)
     attrs = read_attrs(path)
     radar, chain = attrs.get("radar"), attrs.get("chain")

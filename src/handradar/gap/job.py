@@ -31,7 +31,8 @@ from handradar.atomic import atomic_write_text
 from handradar.data.convention import ConventionCheck, check_row
 from handradar.data.datasets import file_hash
 from handradar.gap.data import GapData, load_dataset
-from handradar.gap.diagnosis import Diagnosis, DiagnosisConfig, check_rows, diagnose
+from handradar.gap.diagnosis import Diagnosis, DiagnosisConfig, diagnose
+from handradar.gap.folds import check_rows
 from handradar.gap.markdown import render
 from handradar.gap.report import fitted_simulator, write_report
 from handradar.provenance import code_version
