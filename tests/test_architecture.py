@@ -207,3 +207,12 @@ def test_the_checker_sees_an_upward_import(tmp_path: Path):
             test_function_local_imports_are_explained()
     finally:
         MODULES.pop("handradar.data._upward_probe", None)
+
+
+MAX_MODULE_LINES = 800  # one idea per file: a module past this holds several (split it by idea)
+
+
+def test_no_module_over_the_line_limit():
+    long = {str(p.relative_to(REPO)): n for p in SRC.rglob("*.py")
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
+    assert not long, f"modules over {MAX_MODULE_LINES} lines: {long}"
