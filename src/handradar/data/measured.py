@@ -73,9 +73,6 @@ class Manifest:
     test_fraction: float | None = None            # the split rule when the layout has no {split}
     split_seed: int = 0
 
-    def unknowns(self) -> list[str]:
-        return [k for k, v in self.radar.items() if v == UNKNOWN] + (["approaching"] if self.approaching == UNKNOWN else [])
-
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], path: Path) -> Manifest:
         """The manifest :meth:`as_dict` stored (a dataset file's attribute ``manifest``); ``path``: that file."""

@@ -33,6 +33,7 @@ from omegaconf import OmegaConf
 from handradar.atomic import atomic_write_text
 from handradar.data.datamodule import FileRows
 from handradar.data.datasets import load_arrays
+from handradar.data.measured import UNKNOWN
 from handradar.data.splits import measured_split
 from handradar.errors import FormatError
 from handradar.gap.unpaired import write_unpaired_gap
@@ -67,9 +68,9 @@ def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
         if k in given:
             grid[k] = [given[k]]
         elif k == "approaching":  # rows of a manifest that states it are already in the project's orientation
-            grid[k] = list(candidates) if m.approaching == "unknown" else ["high"]
+            grid[k] = list(candidates) if m.approaching == UNKNOWN else ["high"]
         elif k in m.radar:
-            grid[k] = list(candidates) if m.radar[k] == "unknown" else [m.radar[k]]
+            grid[k] = list(candidates) if m.radar[k] == UNKNOWN else [m.radar[k]]
         else:  # the receiver noise floor: no manifest field, a nuisance of the synthetic rows
             grid[k] = list(candidates)
     if all(len(v) == 1 for v in grid.values()):
