@@ -34,8 +34,9 @@ import numpy as np
 from handradar.atomic import file_lock
 from handradar.config import read_yaml
 from handradar.data.hdf5 import open_writer
+from handradar.data.skeletons import motion_classes
 from handradar.errors import FormatError
-from handradar.hand.motions import DEFAULT_RANGES, MOTIONS
+from handradar.hand.motions import DEFAULT_RANGES
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
 from handradar.radar.config import RadarConfig
@@ -158,18 +159,15 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
     if not test:
         raise FormatError(path, "no test split: list one under rows.test (or add split folders)")
     raw_classes = _need(path, d, "classes", dict)
-    classes, folders = {}, {}
-    for name, spec in raw_classes.items():
-        spec = {"motions": spec} if isinstance(spec, (str, list)) else spec
-        if not isinstance(spec, dict):
-            raise FormatError(path, f"class {name!r}: give its motions as a list, or {{motions: [...], folder: NAME}}")
-        motions = spec.get("motions")
-        motions = [motions] if isinstance(motions, str) else list(motions or [])
-        unknown = [m for m in motions if m not in MOTIONS]
-        if not motions or unknown:
-            raise FormatError(path, f"class {name!r}: " + (f"unknown motion {unknown[0]!r}" if unknown else "no motion")
-                              + f"; choose from {list(MOTIONS)}")
-        classes[str(name)], folders[str(name)] = motions, str(spec.get("folder", name))
+    specs = {name: {"motions": spec} if isinstance(spec, (str, list)) else spec for name, spec in raw_classes.items()}
+    bad = next((name for name, spec in specs.items() if not isinstance(spec, dict)), None)
+    if bad is not None:
+        raise FormatError(path, f"class {bad!r}: give its motions as a list, or {{motions: [...], folder: NAME}}")
+    try:
+        classes = motion_classes({name: spec.get("motions") for name, spec in specs.items()})
+    except ValueError as exc:  # an unknown motion, or none
+        raise FormatError(path, str(exc)) from None
+    folders = {str(name): str(spec.get("folder", name)) for name, spec in specs.items()}
     axes = _need(path, d, "axes", dict)
     doppler = axes.get("doppler", "rows")
     if doppler not in ("rows", "columns"):
