@@ -11,7 +11,7 @@ import yaml
 
 from handradar.data.datasets import load_arrays
 from handradar.data.hdf5 import read_attrs, validate
-from handradar.data.measured import MeasuredDataset, read_manifest
+from handradar.data.measured import MeasuredDataset, dataset_chain, read_manifest, synthesis_radar
 from handradar.data.splits import measured_split
 from handradar.errors import FormatError
 
@@ -149,3 +149,19 @@ def test_xia2021_manifest(tmp_path):
     # the zero-Doppler band (row 31 of the images) lands on the centre row in every class mean
     means = np.stack([d.x[d.y == c].mean(axis=(0, 2)) for c in range(8)])
     assert np.all(np.abs(np.argmax(means, axis=1) - 32) <= 1)
+
+
+def test_synthesis_radar_and_chain_hold_the_dataset_grid(tmp_path):
+    """v_max = lambda / (4 T_loop) (TI's velocity resolution note); chirps a frame zero-padded to the Doppler rows."""
+    m = read_manifest(stand_in(tmp_path))  # 48 Doppler rows x 32 frames, doppler on the columns
+    shape = (48, 32)
+    radar = synthesis_radar(m, shape, {"v_max_m_s": 2.0, "frame_period_s": 0.05, "chirps_per_frame": 16})
+    assert radar.n_loops == 16 and radar.frame_period_s == 0.05
+    assert radar.wavelength_m / (4 * radar.loop_period_s) == pytest.approx(2.0)
+    chain = dataset_chain(m, shape, radar.n_loops)
+    assert (chain.stft_len, chain.stft_hop, chain.n_doppler, chain.n_columns) == (16, 16, 48, 32)
+    assert synthesis_radar(m, shape, {"v_max_m_s": 2.0, "frame_period_s": 0.05, "chirps_per_frame": None}).n_loops == 48
+    with pytest.raises(ValueError, match="expected 2 to the 48 Doppler bins"):
+        synthesis_radar(m, shape, {"v_max_m_s": 2.0, "frame_period_s": 0.05, "chirps_per_frame": 64})
+    with pytest.raises(ValueError, match="do not fit"):
+        synthesis_radar(m, shape, {"v_max_m_s": 0.5, "frame_period_s": 0.02, "chirps_per_frame": 48})

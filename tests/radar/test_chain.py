@@ -17,6 +17,7 @@ from handradar.radar.chain import (
     range_profiles_from_adc,
     range_response,
     spectrogram_from_profiles,
+    stft_power,
     velocity_axis_m_s,
 )
 from handradar.radar.signal import beat_signal, carrier_phase_rad
@@ -247,3 +248,41 @@ def test_chain_config_rejects_bad_settings():
         ChainConfig(range_window="kaiser-ish")
     with pytest.raises(ValueError, match="gate_m"):
         ChainConfig(gate_m=(0.5, 0.2))
+
+
+@pytest.mark.parametrize("n_chirps", [16, 32, 64])
+def test_zero_padded_doppler_is_the_windowed_dtft_at_the_bins(n_chirps):
+    """doppler_bins > stft_len: each row is the windowed slow-time signal's DTFT at (k - D/2) / D cycles a loop,
+    summed directly here (no FFT), for a tone between bins and a random signal; the rows are D whatever N is."""
+    d = 64
+    chain = ChainConfig(stft_len=n_chirps, stft_hop=n_chirps, doppler_bins=d, n_columns=1, stft_window="hamming")
+    n = np.arange(n_chirps)
+    rng = np.random.default_rng(0)
+    tone = np.exp(2j * np.pi * 0.1371 * n)
+    noise = rng.normal(size=n_chirps) + 1j * rng.normal(size=n_chirps)
+    w = 0.54 - 0.46 * np.cos(2 * np.pi * n / n_chirps)  # periodic Hamming
+    for x in (tone, noise):
+        profiles = torch.as_tensor(x.reshape(1, n_chirps, 1, 1), dtype=torch.complex128)
+        power = stft_power(profiles, chain)[:, 0].numpy()
+        k = np.arange(d) - d // 2
+        dtft = (w * x * np.exp(2j * np.pi * np.outer(k, n) / d)).sum(axis=1)
+        assert power.shape == (d,)
+        np.testing.assert_allclose(power, np.abs(dtft) ** 2, rtol=1e-9, atol=1e-9 * np.abs(dtft).max() ** 2)
+    with pytest.raises(ValueError, match="fewer than the STFT length"):
+        ChainConfig(stft_len=64, doppler_bins=32)
+
+
+def test_fewer_chirps_widen_the_zero_doppler_line_as_the_window_says():
+    """A still target with 32 Hamming-windowed chirps zero-padded to 64 bins: neighbours at -1.8 and -7.4 dB
+    (|0.54 + 0.23 (e^{j pi k/2} ...)|^2 of the window's DTFT at half-bin steps), against -7.4 dB and nothing with 64."""
+    def line(n_chirps):
+        chain = ChainConfig(stft_len=n_chirps, stft_hop=n_chirps, doppler_bins=64, n_columns=1)
+        p = stft_power(torch.ones(1, n_chirps, 1, 1, dtype=torch.complex128), chain)[:, 0].numpy()
+        return 10 * np.log10(p[30:35] / p.max() + 1e-30)
+
+    w32 = 0.54 - 0.46 * np.cos(2 * np.pi * np.arange(32) / 32)
+    half_bin = 10 * np.log10(abs((w32 * np.exp(1j * np.pi * np.arange(32) / 32)).sum()) ** 2 / w32.sum() ** 2)
+    np.testing.assert_allclose(line(32)[[1, 3]], half_bin, atol=1e-6)
+    assert half_bin == pytest.approx(-1.8, abs=0.1)
+    assert line(32)[0] == pytest.approx(10 * np.log10((0.23 / 0.54) ** 2), abs=1e-6)  # a whole bin: -7.4 dB
+    assert line(64)[1] == pytest.approx(10 * np.log10((0.23 / 0.54) ** 2), abs=1e-6) and line(64)[0] < -200

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import integrate, special, stats
 import torch
 import yaml
 
@@ -24,7 +25,7 @@ from handradar.synthesis.measured import (
 )
 
 CLASSES = {"push": ["push"], "pull": ["pull"], "swipe": ["swipe_right"]}
-TRUTH = {"v_max_m_s": 2.0, "frame_period_s": 0.04, "dynamic_range_db": 20.0, "approaching": "low"}
+TRUTH = {"v_max_m_s": 2.0, "frame_period_s": 0.04, "chirps_per_frame": 16, "dynamic_range_db": 20.0, "approaching": "low"}
 
 
 def test_refloor_is_the_chain_at_a_shallower_floor():
@@ -61,23 +62,23 @@ def test_fit_recovers_known_unknowns(tmp_path):
     real = load_arrays(real_path)
     rows = np.flatnonzero((real.meta["split"] == "train") & (real.x.max(axis=(1, 2)) > 0))  # the simulated rows
 
-    def simulate(v_max: float, frame_s: float):
+    def simulate(radar: dict):
         try:
-            d = load_arrays(synthesize_measured(real_path, {"v_max_m_s": v_max, "frame_period_s": frame_s,
-                                                            "dynamic_range_db": DEEP_FLOOR_DB},
+            d = load_arrays(synthesize_measured(real_path, {**radar, "dynamic_range_db": DEEP_FLOOR_DB},
                                                 per_class=8, seed=0, cache_dir=tmp_path / "synth"))
         except ValueError:
             return None
         return d.x, d.y
 
-    grid = {"v_max_m_s": [0.5, 2.0, 4.0], "frame_period_s": [0.04, 0.08], "dynamic_range_db": [10.0, 20.0, 40.0],
-            "approaching": ["high", "low"]}
+    grid = {"v_max_m_s": [0.5, 2.0, 4.0], "frame_period_s": [0.04, 0.08], "chirps_per_frame": [16, 32],
+            "dynamic_range_db": [10.0, 20.0, 40.0], "approaching": ["high", "low"]}
     fit = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulate, grid, n_boot=50, seed=0)
-    assert fit.values == {**TRUTH, "noise_db": None}
+    assert fit.values == {**TRUTH, "noise_db": None, "noise_looks": 1}
     assert fit.shares["approaching"]["low"] > 0.9 and fit.n_rows == 24
-    # v_max 0.5 m/s needs 32 loops of 1.95 ms: no 40 ms frame holds them, so that pair is no candidate
-    assert not any(c["v_max_m_s"] == 0.5 and c["frame_period_s"] == 0.04 for c in fit.candidates)
-    assert len(fit.candidates) == 5 * 3 * 2
+    # v_max 0.5 m/s needs loops of 1.95 ms: 32 of them fit in no 40 ms frame, so that radar is no candidate (16 do)
+    assert not any(c["v_max_m_s"] == 0.5 and c["frame_period_s"] == 0.04 and c["chirps_per_frame"] == 32
+                   for c in fit.candidates)
+    assert len(fit.candidates) == 11 * 3 * 2
     assert fit.ranges["dynamic_range_db"][0] <= 20.0 <= fit.ranges["dynamic_range_db"][1]
 
 
@@ -92,25 +93,53 @@ def test_noise_floor_closed_form():
     assert np.all(y[:, 10, 10] == 1.0)
 
 
+@pytest.mark.parametrize("looks", [1, 8])
+def test_noise_looks_closed_form(looks):
+    """Noise power averaged over L cells is Gamma(L, 1/L) (scipy's law, not our code). On a pixel at the 60 dB floor
+    (power 1e-6 of the peak) its dB is 10 log10(1e-6 + 10^(level / 10) G): moments integrated from that law; far
+    above the floor they are the digamma / trigamma closed forms of 10 log10 G."""
+    x = np.zeros((8, 64, 64), np.float32)
+    x[:, 10, 10] = 1.0
+    level = -30.0
+    y = add_noise_floor(x, level, np.random.default_rng(1), looks)
+    db = np.delete(y.reshape(8, -1), 10 * 64 + 10, axis=1) * DEEP_FLOOR_DB - DEEP_FLOOR_DB
+    law = stats.gamma(looks, scale=1.0 / looks)
+
+    def moment(p: int) -> float:
+        f = lambda g: (10 * np.log10(10 ** (-DEEP_FLOOR_DB / 10) + 10 ** (level / 10) * g)) ** p * law.pdf(g)  # noqa: E731
+        return integrate.quad(f, 0, np.inf, limit=200)[0]
+
+    mean, var = moment(1), moment(2) - moment(1) ** 2
+    assert db.mean() == pytest.approx(mean, abs=4 * np.sqrt(var / db.size))  # 4 standard errors
+    assert db.std() == pytest.approx(np.sqrt(var), rel=0.01)
+    k = 10 * np.log10(np.e)  # the floor lifts little: the closed forms of 10 log10 G agree to 0.15 dB
+    assert mean == pytest.approx(level + k * (special.digamma(looks) - np.log(looks)), abs=0.15)
+    assert np.sqrt(var) == pytest.approx(k * np.sqrt(special.polygamma(1, looks)), abs=0.15)
+    with pytest.raises(ValueError, match="positive count"):
+        add_noise_floor(x, level, np.random.default_rng(1), 0)
+
+
 def test_fit_recovers_a_noise_floor(tmp_path):
-    """Rows of the stand-in's truth with noise 25 dB below the peak: the fit names that level among others."""
+    """Rows of the stand-in's truth with noise 25 dB below the peak, averaged over 8 cells: the fit names that level
+    and those looks among others (the level alone is confounded with the looks in a class mean: the spread tells)."""
     real_path = measured_stand_in(tmp_path)
-    truth = {**TRUTH, "noise_db": -25.0}
+    truth = {**TRUTH, "noise_db": -25.0, "noise_looks": 8}
     sim = load_arrays(synthesize_measured(real_path, {**truth, "dynamic_range_db": DEEP_FLOOR_DB, "approaching": "high",
                                                       "noise_db": None}, per_class=8, seed=99,
                                           cache_dir=tmp_path / "synth"))
     measured_x = finish_rows(sim.x, truth, 5)  # the truth's rows with noise, another noise draw than the fit's
 
-    def simulate(v_max: float, frame_s: float):
-        d = load_arrays(synthesize_measured(real_path, {"v_max_m_s": v_max, "frame_period_s": frame_s,
-                                                        "dynamic_range_db": DEEP_FLOOR_DB},
+    def simulate(radar: dict):
+        d = load_arrays(synthesize_measured(real_path, {**radar, "dynamic_range_db": DEEP_FLOOR_DB},
                                             per_class=8, seed=0, cache_dir=tmp_path / "synth"))
         return d.x, d.y
 
-    grid = {"v_max_m_s": [2.0], "frame_period_s": [0.04], "dynamic_range_db": [20.0, 40.0],
-            "approaching": ["low"], "noise_db": [None, -40.0, -25.0, -10.0]}
+    grid = {"v_max_m_s": [2.0], "frame_period_s": [0.04], "chirps_per_frame": [16], "dynamic_range_db": [20.0, 40.0],
+            "approaching": ["low"], "noise_db": [None, -40.0, -25.0, -10.0], "noise_looks": [1, 8]}
     fit = fit_unknowns(measured_x, sim.y, len(CLASSES), simulate, grid, n_boot=20, seed=0)
-    assert fit.values["noise_db"] == -25.0
+    assert (fit.values["noise_db"], fit.values["noise_looks"]) == (-25.0, 8)
+    # without noise, its looks are no separate candidates: 2 floors x (1 noise-free + 3 levels x 2 looks)
+    assert len(fit.candidates) == 2 * (1 + 3 * 2)
 
 
 def test_mirror_doppler_about_the_zero_row():

@@ -147,7 +147,7 @@ def open_writer(path: str | Path, *, classes: Sequence[str], radar: RadarConfig 
             h5.attrs["skeleton_rate_hz"] = float(skeleton_rate_hz)
             for k, v in (extra_attrs or {}).items():
                 h5.attrs[k] = v
-            writer = DatasetWriter(h5, n_steps, (chain.stft_len, chain.n_columns))
+            writer = DatasetWriter(h5, n_steps, (chain.n_doppler, chain.n_columns))
             yield writer
             writer.finish()
 

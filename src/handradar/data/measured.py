@@ -325,12 +325,14 @@ def resample(a: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return out[0, 0].clamp(0, 1).numpy()
 
 
-def dataset_chain(m: Manifest, shape: tuple[int, int]) -> ChainConfig:
-    """The chain that reproduces the dataset's processing: frame-based Doppler (one column per frame,
-    ``doppler`` bins from a frame's chirp loops), its clutter removal and dynamic range (30 dB while unknown)."""
+def dataset_chain(m: Manifest, shape: tuple[int, int], chirps: int | None = None) -> ChainConfig:
+    """The chain that reproduces the dataset's processing: frame-based Doppler (one column per frame: the
+    frame's ``chirps`` loops, default ``doppler``, zero-padded to the ``doppler`` bins of ``shape``), its clutter
+    removal and dynamic range (30 dB while unknown)."""
     dr = m.radar["dynamic_range_db"]
-    return ChainConfig(stft_len=shape[0], stft_hop=shape[0], n_columns=shape[1], clutter_removal=m.clutter_removal,
-                       dynamic_range_db=30.0 if dr == UNKNOWN else float(dr))
+    n = int(chirps or shape[0])
+    return ChainConfig(stft_len=n, stft_hop=n, doppler_bins=shape[0], n_columns=shape[1],
+                       clutter_removal=m.clutter_removal, dynamic_range_db=30.0 if dr == UNKNOWN else float(dr))
 
 
 class MeasuredDataset:
@@ -380,13 +382,14 @@ def write_measured(m: Manifest, rows: Sequence[tuple[str, int, Path]], out: Path
 
 
 def synthesis_radar(m: Manifest, shape: tuple[int, int], values: Mapping[str, float]) -> RadarConfig:
-    """A radar whose frame-based Doppler map has the dataset's grid: ``shape[0]`` chirp loops a frame, a
-    loop period giving ``v_max_m_s`` (v_max = lambda / (4 T_loop)), ``frame_period_s`` a column.
+    """A radar whose frame-based Doppler map has the dataset's grid: ``chirps_per_frame`` chirp loops a frame
+    (default ``shape[0]``, at most that: the chain zero-pads them to the ``shape[0]`` Doppler bins), a loop period
+    giving ``v_max_m_s`` (v_max = lambda / (4 T_loop)), ``frame_period_s`` a column.
 
     ``values`` gives the manifest's unknowns (fitted); the fast-time set-up (which only places the
     hand in range bins, summed over by the chain) is the AWR1843 default's. One TX, one RX."""
     known = {k: v for k, v in m.radar.items() if v != UNKNOWN}
-    r = {**known, **{k: float(v) for k, v in values.items() if k in RADAR_FIELDS}}
+    r = {**known, **{k: float(v) for k, v in values.items() if k in RADAR_FIELDS and v is not None}}
     missing = [k for k in ("carrier_hz", "v_max_m_s", "frame_period_s") if k not in r]
     if missing:
         raise ValueError(f"{m.path}: radar.{missing[0]} is unknown and not fitted")
@@ -395,7 +398,9 @@ def synthesis_radar(m: Manifest, shape: tuple[int, int], values: Mapping[str, fl
     loop_s = base.wavelength_m / (4.0 * r["v_max_m_s"])  # carrier_hz is the sweep start, as TI states it
     if loop_s <= base.ramp_end_time_s + 1e-6:
         raise ValueError(f"v_max {r['v_max_m_s']:g} m/s needs chirps of {loop_s * 1e6:.1f} us, shorter than the ramp")
-    n_loops = int(shape[0])
+    n_loops = int(r.get("chirps_per_frame", shape[0]))
+    if not 2 <= n_loops <= shape[0]:
+        raise ValueError(f"{m.path}: {n_loops} chirps a frame: expected 2 to the {shape[0]} Doppler bins of its grid")
     frame_s = float(r["frame_period_s"])
     if frame_s < n_loops * loop_s:
         raise ValueError(f"{n_loops} chirp loops of {loop_s * 1e3:.3f} ms (v_max {r['v_max_m_s']:g} m/s) do not fit in a "

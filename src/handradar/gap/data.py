@@ -63,8 +63,8 @@ def load_dataset(path: str | Path) -> GapData:
         masks = h5["hand_mask"][()].astype(bool) if "hand_mask" in h5 else np.abs(skeletons).sum(axis=(-2, -1)) > 0
     rate = float(attrs["skeleton_rate_hz"])
     times = np.arange(skeletons.shape[1]) / rate
-    if measured.shape[1:] != (chain.stft_len, chain.n_columns):
+    if measured.shape[1:] != (chain.n_doppler, chain.n_columns):
         raise FormatError(path, f"spectrograms {measured.shape[1:]} do not match the chain's "
-                                f"({chain.stft_len}, {chain.n_columns})")
+                                f"({chain.n_doppler}, {chain.n_columns})")
     return GapData(measured, RowSet(skeletons, masks, times), labels, read_meta_group(path), radar, chain, rate, path,
                    *read_convention(path))

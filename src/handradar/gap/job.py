@@ -54,7 +54,7 @@ def write_outputs(diagnosis: Diagnosis, out_dir: str | Path, radar: RadarConfig,
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"json": write_report(out / "gap_report.json", diagnosis.report, n_doppler=chain.stft_len,
+    paths = {"json": write_report(out / "gap_report.json", diagnosis.report, n_doppler=chain.n_doppler,
                                   n_columns=chain.n_columns)}
     # the fitted simulator, for train.py / handradar-synth: sim=fitted sim.from_report=<this file>
     paths["sim"] = out / "fitted_sim.yaml"

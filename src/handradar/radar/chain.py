@@ -51,6 +51,8 @@ class ChainConfig:
     gate_m: range interval (metres) of the bins kept; the hand is expected inside it.
     stft_len / stft_hop: slow-time STFT window length and hop, in chirp loops; windows never
     straddle two frames (frames are separated by idle time).
+    doppler_bins: the Doppler FFT's length, the window zero-padded to it (None: ``stft_len``, no padding);
+    the spectrogram has this many rows (:attr:`n_doppler`).
     n_columns: spectrogram width; it must be a whole number of frames' worth of columns.
     dynamic_range_db: values more than this below the spectrogram's peak are clamped to 0.
     """
@@ -60,6 +62,7 @@ class ChainConfig:
     stft_window: str = "hamming"
     stft_len: int = 64
     stft_hop: int = 64
+    doppler_bins: int | None = None
     n_columns: int = 32
     dynamic_range_db: float = 30.0
     clutter_removal: bool = True
@@ -73,6 +76,13 @@ class ChainConfig:
             raise ValueError(f"gate_m must be an increasing pair of ranges >= 0, found {self.gate_m}")
         if self.stft_len <= 0 or self.stft_hop <= 0 or self.n_columns <= 0 or self.dynamic_range_db <= 0:
             raise ValueError("stft_len, stft_hop, n_columns and dynamic_range_db must be positive")
+        if self.doppler_bins is not None and int(self.doppler_bins) < self.stft_len:
+            raise ValueError(f"doppler_bins {self.doppler_bins} is fewer than the STFT length {self.stft_len}")
+
+    @property
+    def n_doppler(self) -> int:
+        """Rows of a spectrogram: the Doppler FFT's length."""
+        return self.stft_len if self.doppler_bins is None else int(self.doppler_bins)
 
     def columns_per_frame(self, radar: RadarConfig) -> int:
         if radar.n_loops < self.stft_len:
@@ -245,9 +255,10 @@ def remove_static_clutter(profiles: torch.Tensor) -> torch.Tensor:
 def stft_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     """STFT over slow time inside each frame, power summed over channels and gated bins.
 
-    profiles (..., frames, loops, channels, bins) -> power (..., doppler = stft_len, columns),
-    columns in time order (``columns_per_frame`` per frame), zero Doppler at row stft_len // 2,
-    approaching reflectors above it (module doc, sign convention).
+    profiles (..., frames, loops, channels, bins) -> power (..., doppler = n_doppler, columns),
+    columns in time order (``columns_per_frame`` per frame), zero Doppler at row n_doppler // 2,
+    approaching reflectors above it (module doc, sign convention). The window is zero-padded to
+    ``n_doppler`` (``doppler_bins``).
     """
     frames, loops = profiles.shape[-4:-2]
     n_win = (loops - chain.stft_len) // chain.stft_hop + 1
@@ -258,7 +269,7 @@ def stft_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     segs = profiles[..., idx, :, :]  # (..., frames, n_win, len, ch, bins)
     w = window(chain.stft_window, chain.stft_len, dtype=profiles.real.dtype, device=profiles.device)
     # the exp(+j) kernel (unscaled inverse DFT): rows ordered by the echo's Doppler shift, approaching above
-    spec = torch.fft.fftshift(torch.fft.ifft(segs * w[:, None, None], dim=-3, norm="forward"), dim=-3)
+    spec = torch.fft.fftshift(torch.fft.ifft(segs * w[:, None, None], n=chain.n_doppler, dim=-3, norm="forward"), dim=-3)
     power = (spec.real**2 + spec.imag**2).sum(dim=(-2, -1))  # (..., frames, n_win, doppler)
     power = power.flatten(-3, -2)  # (..., columns, doppler)
     return power.transpose(-1, -2)
@@ -309,9 +320,9 @@ def white_noise_power(variance: torch.Tensor, chain: ChainConfig, n_chirps: int,
     variance (sum w^2 - |W(d)|^2 / n_chirps), W the window's DFT: the mean removal notches the
     rows near zero Doppler only. Summed over ``n_channels`` channels and ``n_bins`` bins."""
     w = window(chain.stft_window, chain.stft_len, dtype=torch.float64)
-    per_row = torch.full((chain.stft_len,), float((w**2).sum()), dtype=torch.float64)
+    per_row = torch.full((chain.n_doppler,), float((w**2).sum()), dtype=torch.float64)
     if chain.clutter_removal:
-        per_row = per_row - torch.fft.fftshift(torch.fft.fft(w).abs() ** 2) / n_chirps
+        per_row = per_row - torch.fft.fftshift(torch.fft.fft(w, n=chain.n_doppler).abs() ** 2) / n_chirps
     variance = torch.as_tensor(variance)
     if not variance.is_floating_point():
         variance = variance.to(torch.float64)
@@ -354,9 +365,9 @@ def capture_spectrogram(profiles: torch.Tensor, radar: RadarConfig, chain: Chain
 
 # ---- axes ---------------------------------------------------------------------------------------
 def doppler_axis_hz(radar: RadarConfig, chain: ChainConfig) -> np.ndarray:
-    """Echo Doppler shift 2 v / lambda of each spectrogram row, positive approaching (row stft_len // 2 is zero)."""
-    k = np.arange(chain.stft_len) - chain.stft_len // 2
-    return k / (chain.stft_len * radar.loop_period_s)
+    """Echo Doppler shift 2 v / lambda of each spectrogram row, positive approaching (row n_doppler // 2 is zero)."""
+    k = np.arange(chain.n_doppler) - chain.n_doppler // 2
+    return k / (chain.n_doppler * radar.loop_period_s)
 
 
 def velocity_axis_m_s(radar: RadarConfig, chain: ChainConfig) -> np.ndarray:

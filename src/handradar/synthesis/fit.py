@@ -130,7 +130,7 @@ def predict_cached(sim: Simulator, net: RadarWeightNet | None, caches: DatasetCa
         weights = None if net is None else net(torch.as_tensor(caches.features.features[sel], dtype=torch.float32),
                                                torch.as_tensor(caches.masks[sel], dtype=torch.bool))
         out.append(sim.render(packed, weights, active=active.any(0), scale=scale))
-    return torch.cat(out) if out else torch.zeros(0, sim.chain.stft_len, sim.chain.n_columns)
+    return torch.cat(out) if out else torch.zeros(0, sim.chain.n_doppler, sim.chain.n_columns)
 
 
 def synth_scores(sim: Simulator, net: RadarWeightNet, pairs: Pairs) -> dict[str, float]:

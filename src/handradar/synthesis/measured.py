@@ -6,14 +6,20 @@ radar whose frame-based Doppler map has the dataset's grid (handradar.data.measu
 
 The fit (:func:`fit_unknowns`, docs/datasets.md#measured-radar-datasets): no measured row has a
 skeleton, so nothing is paired. For every candidate of the unknowns the synthetic rows' class-mean
-images are compared with the measured rows' class means: the objective is 1 - SSIM averaged over
-classes (torchmetrics SSIM, ``data_range=1.0``). Two unknowns cost no new simulation and are exact:
+and class-spread images (per-pixel standard deviation) are compared with the measured rows': the
+objective is 1 - SSIM averaged over both images of every class (torchmetrics SSIM, ``data_range=1.0``).
+The spread is what tells a noise floor's texture (its looks) apart from its level. Two unknowns cost
+no new simulation and are exact:
 
 - the dB floor: rows synthesised with a deep floor D0 are re-floored at any D <= D0 by
   ``clip((x D0 - (D0 - D)) / D, 0, 1)`` (a spectrogram in [0, 1] is ``(dB - peak + D0) / D0``);
 - which end of the Doppler axis is approaching: a mirror about the zero row.
 
-The loop period (v_max) and the time per column need a simulation each. The uncertainty is a
+A receiver noise floor (its level and looks, :func:`add_noise_floor`) is added to the simulated rows
+without a new simulation either.
+
+The loop period (v_max), the time per column and the chirps a frame (zero-padded to the Doppler
+bins: fewer chirps widen every Doppler line) need a simulation each. The uncertainty is a
 bootstrap over the measured rows (classes resampled within themselves): the share of resamples that
 choose each candidate value, and the 2.5-97.5 % range of the chosen values.
 """
@@ -42,6 +48,7 @@ from handradar.synthesis.providers import synthesize_source
 log = logging.getLogger(__name__)
 
 DEEP_FLOOR_DB = 60.0  # the floor rows are synthesised at before the fit re-floors them
+OBJECTIVE = "1 - SSIM of class-mean and class-spread images, mean over both and over classes"
 
 
 def mirror_doppler(x: np.ndarray) -> np.ndarray:
@@ -62,29 +69,38 @@ def measured_manifest(real_path: str | Path) -> tuple[Manifest, tuple[int, int]]
     attrs = read_attrs(real_path)
     if attrs.get("skeletons") != "none" or "manifest" not in attrs:
         raise FormatError(real_path, "not a measured dataset (data=measured data.manifest=FILE builds one)")
-    return Manifest.from_dict(json.loads(attrs["manifest"]), Path(real_path)), (attrs["chain"].stft_len,
+    return Manifest.from_dict(json.loads(attrs["manifest"]), Path(real_path)), (attrs["chain"].n_doppler,
                                                                                 attrs["chain"].n_columns)
 
 
-def add_noise_floor(x: np.ndarray, noise_db: float, rng: np.random.Generator) -> np.ndarray:
+def add_noise_floor(x: np.ndarray, noise_db: float, rng: np.random.Generator, looks: int = 1) -> np.ndarray:
     """Rows at a ``DEEP_FLOOR_DB`` floor with receiver noise added, at the same floor again.
 
     Each row's power relative to its peak, ``10^((x D0 - D0) / 10)``, gains white noise of mean power
-    ``10^(noise_db / 10)`` per pixel (``noise_db`` < 0: below the noise-free peak), exponentially distributed as
-    the power of complex Gaussian noise is; the row is then rescaled to its new peak (handradar.radar.chain
-    power_to_unit)."""
+    ``10^(noise_db / 10)`` per pixel (``noise_db`` < 0: below the noise-free peak). A pixel's noise is the power of
+    ``looks`` independent complex Gaussian cells averaged (range bins or antennas collapsed into one Doppler
+    row): gamma-distributed with shape ``looks`` and mean 1; ``looks`` = 1 is the exponential power of one cell.
+    The row is then rescaled to its new peak (handradar.radar.chain power_to_unit)."""
+    if int(looks) < 1:
+        raise ValueError(f"noise looks must be a positive count, found {looks}")
     d0 = DEEP_FLOOR_DB
-    power = 10.0 ** ((x.astype(np.float64) * d0 - d0) / 10.0) + 10.0 ** (noise_db / 10.0) * rng.exponential(size=x.shape)
+    noise = rng.gamma(float(int(looks)), 1.0 / int(looks), size=x.shape)
+    power = 10.0 ** ((x.astype(np.float64) * d0 - d0) / 10.0) + 10.0 ** (noise_db / 10.0) * noise
     db = 10.0 * np.log10(power)
     top = db.max(axis=(-2, -1), keepdims=True)
     return np.clip((db - top + d0) / d0, 0.0, 1.0).astype(np.float32)
 
 
+FINISH_KEYS = ("noise_db", "noise_looks", "dynamic_range_db", "approaching")  # what finish_rows applies
+
+
 def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: int) -> np.ndarray:
     """Rows simulated at a ``DEEP_FLOOR_DB`` floor, approaching high, as ``values`` says the dataset shows them: receiver
-    noise (``noise_db``, None: none), the dB floor (``dynamic_range_db``), the approaching end (``approaching``)."""
+    noise (``noise_db``, None: none; ``noise_looks`` cells averaged per pixel, default 1), the dB floor
+    (``dynamic_range_db``), the approaching end (``approaching``)."""
     if values.get("noise_db") is not None:
-        x = add_noise_floor(x, float(values["noise_db"]), np.random.default_rng([int(seed), 7]))
+        x = add_noise_floor(x, float(values["noise_db"]), np.random.default_rng([int(seed), 7]),
+                            int(values.get("noise_looks") or 1))
     if values.get("dynamic_range_db") is not None:
         x = refloor(x, DEEP_FLOOR_DB, float(values["dynamic_range_db"]))
     return mirror_doppler(x) if values.get("approaching", "high") == "low" else x
@@ -93,11 +109,12 @@ def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: i
 def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str | None], *, per_class: int, seed: int,
                         cache_dir: str | Path, sim: Mapping | None = None) -> Path:
     """Synthetic rows of a measured dataset's classes, cached by everything that makes them. ``values`` holds the
-    manifest's unknowns: ``v_max_m_s`` and ``frame_period_s`` set the simulated radar; ``noise_db``,
-    ``dynamic_range_db`` and ``approaching`` are applied to the rows simulated at a deep floor (:func:`finish_rows`)."""
+    manifest's unknowns: ``v_max_m_s``, ``frame_period_s`` and ``chirps_per_frame`` set the simulated radar;
+    ``noise_db``, ``noise_looks``, ``dynamic_range_db`` and ``approaching`` are applied to the rows simulated at a deep
+    floor (:func:`finish_rows`)."""
     m, shape = measured_manifest(real_path)
     radar = synthesis_radar(m, shape, values)
-    chain = replace(dataset_chain(m, shape), dynamic_range_db=DEEP_FLOOR_DB)
+    chain = replace(dataset_chain(m, shape, radar.n_loops), dynamic_range_db=DEEP_FLOOR_DB)
     source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
               "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
     out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, chain, dict(sim or {}), 'measured/1')}.h5"
@@ -106,9 +123,11 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
                  len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3)
         synthesize_source(source, out, radar=radar, chain=chain, sim=dict(sim or {}) or None,
                           cache_dir=Path(cache_dir) / "profiles", progress=False)
-    finish = {k: values.get(k) for k in ("noise_db", "dynamic_range_db", "approaching")}
+    finish = {k: values.get(k) for k in FINISH_KEYS}
     if finish["dynamic_range_db"] is not None and float(finish["dynamic_range_db"]) == DEEP_FLOOR_DB:
         finish["dynamic_range_db"] = None  # the simulated floor already
+    if finish["noise_db"] is None:
+        finish["noise_looks"] = None  # no noise: its looks change nothing
     if all(v in (None, "high") for v in finish.values()):
         return out
     finished = out.with_name(f"{out.stem}-{config_hash(finish, seed)}.h5")
@@ -121,17 +140,14 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     return finished
 
 
-def class_means(x: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
-    """(n_classes, doppler, columns) mean image of each class; a class without rows is an error."""
+def class_moments(x: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
+    """(2 n_classes, doppler, columns): each class's mean image, then its per-pixel standard deviation (the spread
+    is what tells a noise floor's texture apart from its level); a class without rows is an error."""
     counts = np.bincount(y, minlength=n_classes)
     if counts.min() == 0:
         raise ValueError(f"class {int(np.argmin(counts))} has no row to take a mean of")
-    return np.stack([x[y == c].mean(axis=0) for c in range(n_classes)])
-
-
-def mean_gap(real_means: np.ndarray, synth_means: np.ndarray) -> float:
-    """1 - SSIM of the class-mean images, averaged over classes."""
-    return float(1.0 - per_example_ssim(real_means, synth_means).mean())
+    return np.concatenate([np.stack([x[y == c].mean(axis=0) for c in range(n_classes)]),
+                           np.stack([x[y == c].std(axis=0) for c in range(n_classes)])])
 
 
 @dataclass
@@ -151,7 +167,7 @@ class UnknownsFit:
 
     def as_dict(self) -> dict:
         return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
-                "n_rows": self.n_rows, "objective": "1 - SSIM of class-mean images, mean over classes"}
+                "n_rows": self.n_rows, "objective": OBJECTIVE}
 
     def summary(self) -> str:
         parts = []
@@ -163,44 +179,51 @@ class UnknownsFit:
 
 
 def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
-                 simulate: Callable[[float, float], tuple[np.ndarray, np.ndarray] | None],
+                 simulate: Callable[[dict], tuple[np.ndarray, np.ndarray] | None],
                  grid: Mapping[str, Sequence], *, n_boot: int = 200, boot_candidates: int = 16,
                  seed: int = 0) -> UnknownsFit:
-    """Choose the unknowns whose synthetic class means are closest to the measured ones (module docstring).
+    """Choose the unknowns whose synthetic class means and spreads are closest to the measured ones (module docstring).
 
-    simulate(v_max_m_s, frame_period_s) -> (x, y): synthetic rows at a floor of ``DEEP_FLOOR_DB``, approaching high;
-    None where that pair is no candidate (a frame too short for its chirps).
+    simulate({v_max_m_s, frame_period_s, chirps_per_frame}) -> (x, y): synthetic rows at a floor of
+    ``DEEP_FLOOR_DB``, approaching high; None where that radar is no candidate (a frame too short for its chirps).
     grid: candidate lists for ``v_max_m_s``, ``frame_period_s``, ``dynamic_range_db`` (each <= DEEP_FLOOR_DB),
-    ``approaching`` (``high`` / ``low``) and optionally ``noise_db`` (None: no noise); a single-value list fixes that
-    unknown. The bootstrap re-ranks the
-    ``boot_candidates`` best candidates of the full fit.
+    ``approaching`` (``high`` / ``low``) and optionally ``chirps_per_frame`` (None: as many as Doppler bins),
+    ``noise_db`` (None: no noise) and ``noise_looks`` (default 1); a single-value list fixes that unknown. The
+    bootstrap re-ranks the ``boot_candidates`` best candidates of the full fit.
     """
-    names = ("v_max_m_s", "frame_period_s", "noise_db", "dynamic_range_db", "approaching")
-    missing = [k for k in names if not grid.get(k) and k != "noise_db"]
+    optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
+    names = ("v_max_m_s", "frame_period_s", "chirps_per_frame", "noise_db", "noise_looks", "dynamic_range_db",
+             "approaching")
+    missing = [k for k in names if not grid.get(k) and k not in optional]
     if missing:
         raise ValueError(f"the fit needs candidates for {missing[0]}")
-    combos, synth_means = [], []
-    for v_max, frame in itertools.product(grid["v_max_m_s"], grid["frame_period_s"]):
-        made = simulate(float(v_max), float(frame))
+    g = {k: list(grid.get(k) or optional[k]) for k in names}
+    combos, synth_moments = [], []
+    for v_max, frame, chirps in itertools.product(g["v_max_m_s"], g["frame_period_s"], g["chirps_per_frame"]):
+        radar = {"v_max_m_s": float(v_max), "frame_period_s": float(frame),
+                 "chirps_per_frame": None if chirps is None else int(chirps)}
+        made = simulate(radar)
         if made is None:
             continue
         x, y = made
-        for noise, floor, approaching in itertools.product(grid.get("noise_db") or [None], grid["dynamic_range_db"],
-                                                            grid["approaching"]):
-            values = {"v_max_m_s": float(v_max), "frame_period_s": float(frame), "noise_db": noise,
-                      "dynamic_range_db": float(floor), "approaching": str(approaching)}
+        for noise, looks, floor, approaching in itertools.product(g["noise_db"], g["noise_looks"],
+                                                                  g["dynamic_range_db"], g["approaching"]):
+            if noise is None and looks != g["noise_looks"][0]:
+                continue  # without noise its looks change nothing: one candidate
+            values = {**radar, "noise_db": noise, "noise_looks": int(looks), "dynamic_range_db": float(floor),
+                      "approaching": str(approaching)}
             combos.append(values)
-            synth_means.append(class_means(finish_rows(x, values, seed), y, n_classes))
+            synth_moments.append(class_moments(finish_rows(x, values, seed), y, n_classes))
     if not combos:
         raise ValueError("no candidate of the grid could be simulated")
-    synth_means = np.stack(synth_means)  # (combos, classes, doppler, columns)
+    synth_moments = np.stack(synth_moments)  # (combos, 2 classes, doppler, columns)
 
-    def objectives(real_means: np.ndarray, which: np.ndarray) -> np.ndarray:
-        flat = np.broadcast_to(real_means, synth_means[which].shape).reshape(-1, *real_means.shape[-2:])
-        s = per_example_ssim(flat, synth_means[which].reshape(-1, *real_means.shape[-2:])).reshape(len(which), n_classes)
+    def objectives(real_moments: np.ndarray, which: np.ndarray) -> np.ndarray:
+        flat = np.broadcast_to(real_moments, synth_moments[which].shape).reshape(-1, *real_moments.shape[-2:])
+        s = per_example_ssim(flat, synth_moments[which].reshape(-1, *real_moments.shape[-2:])).reshape(len(which), -1)
         return 1.0 - s.mean(axis=1)
 
-    gaps = objectives(class_means(real_x, real_y, n_classes), np.arange(len(combos)))
+    gaps = objectives(class_moments(real_x, real_y, n_classes), np.arange(len(combos)))
     best = int(np.argmin(gaps))
     # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
     # behind on all rows is not chosen by a resample of them
@@ -210,7 +233,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     chosen = []
     for _ in range(n_boot):
         rows = np.concatenate([rng.choice(m, size=len(m)) for m in members])
-        chosen.append(int(contenders[np.argmin(objectives(class_means(real_x[rows], real_y[rows], n_classes),
+        chosen.append(int(contenders[np.argmin(objectives(class_moments(real_x[rows], real_y[rows], n_classes),
                                                             contenders))]))
     shares = {k: {} for k in names}
     for i in chosen:

@@ -83,14 +83,14 @@ def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
     else:
         n_classes = len(job.real.classes)
 
-        def simulate(v_max: float, frame_s: float) -> tuple[np.ndarray, np.ndarray] | None:
+        def simulate(radar: dict) -> tuple[np.ndarray, np.ndarray] | None:
+            values = {k: v for k, v in radar.items() if v is not None}
             try:
-                path = synthesize_measured(job.real.path, {"v_max_m_s": v_max, "frame_period_s": frame_s,
-                                                           "dynamic_range_db": DEEP_FLOOR_DB},
+                path = synthesize_measured(job.real.path, {**values, "dynamic_range_db": DEEP_FLOOR_DB},
                                            per_class=int(fit["per_class"]), seed=int(fit["seed"]),
                                            cache_dir=Path(job.cfg.synth.cache_dir), sim=sim)
             except ValueError as exc:  # chirps that do not fit in the frame: no candidate
-                log.info("fit: v_max %g m/s, %g ms a column skipped (%s)", v_max, frame_s * 1e3, exc)
+                log.info("fit: %s skipped (%s)", ", ".join(f"{k} {v:g}" for k, v in values.items()), exc)
                 return None
             d = load_arrays(path)
             return d.x, d.y

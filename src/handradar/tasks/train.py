@@ -434,7 +434,7 @@ class Job:
                              f"rows (settings synth.fit.*): {exc}; use more rows per gesture (split.fraction, "
                              "split.per_class), or synth.fit_sim=none") from None
         if self.rank_zero:
-            write_report(self.state / "fit_report.json", diag.report, n_doppler=data.chain.stft_len,
+            write_report(self.state / "fit_report.json", diag.report, n_doppler=data.chain.n_doppler,
                          n_columns=data.chain.n_columns)
             atomic_write_text(f, OmegaConf.to_yaml(settings))
             self.tracker.log_artifact(f, "synthesis")
