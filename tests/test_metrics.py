@@ -59,3 +59,10 @@ def test_bootstrap_difference_separates_clear_winner_from_tie():
     twin = strong + rng.normal(0, 0.01, 150)
     _, ci_tie = bootstrap_difference(base, strong, twin)
     assert ci_tie[0] < 0 < ci_tie[1]
+
+
+def test_per_example_ssim_in_chunks_is_the_same():
+    rng = np.random.default_rng(0)
+    a, b = rng.uniform(size=(7, 16, 16)), rng.uniform(size=(7, 16, 16))
+    np.testing.assert_array_equal(per_example_ssim(a, b, chunk=3), per_example_ssim(a, b))
+    assert per_example_ssim(a[:0], b[:0]).shape == (0,)

@@ -93,11 +93,13 @@ def fast_ssim_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 
 
 # ---- per-example scores and the gap statistics -------------------------------------------------
-def per_example_ssim(measured: torch.Tensor, simulated: torch.Tensor) -> np.ndarray:
-    """SSIM of each (H, W) pair in [0, 1]: shape (N,) float64, no gradient."""
+def per_example_ssim(measured: torch.Tensor, simulated: torch.Tensor, chunk: int = 1024) -> np.ndarray:
+    """SSIM of each (H, W) pair in [0, 1]: shape (N,) float64, no gradient; ``chunk`` pairs at a time (the SSIM's
+    intermediate maps take ~20x the pairs' memory)."""
     m = torch.as_tensor(measured, dtype=torch.float32).reshape(-1, 1, *measured.shape[-2:])
     s = torch.as_tensor(simulated, dtype=torch.float32).reshape(-1, 1, *simulated.shape[-2:])
-    return ssim(s, m, reduction="none").detach().cpu().numpy().astype(np.float64)
+    parts = [ssim(s[i:i + chunk], m[i:i + chunk], reduction="none").detach().cpu() for i in range(0, len(m), chunk)]
+    return torch.cat(parts).numpy().astype(np.float64) if parts else np.zeros(0)
 
 
 def per_example_mse(measured: torch.Tensor, simulated: torch.Tensor) -> np.ndarray:

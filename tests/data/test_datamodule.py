@@ -12,6 +12,7 @@ import torch
 from handradar.data.datamodule import (
     ArrayRows,
     EpochSeededSampler,
+    MixedSampler,
     FileRows,
     SpectrogramDataModule,
     TrainingRowsDataModule,
@@ -134,3 +135,21 @@ def test_training_rows_mix_files_and_arrays_in_a_seeded_resumable_order(fake_dat
     assert list(sampler) != order  # another epoch, another order
     with pytest.raises(ValueError, match="labels for"):
         TrainingRowsDataModule([FileRows(fake_data, rows, np.asarray([1]))], batch_size=2, seed=0)
+
+
+def test_mixed_sampler_gives_each_part_its_share():
+    """8 real rows beside 1600 synthetic with shares 0.5 / 0.5: about half of an epoch's 1608 draws are real
+    (binomial: 3 standard deviations is 0.037), every real row drawn, all indices in range; (seed, epoch) fix it."""
+    sampler = MixedSampler([8, 1600], [0.5, 0.5], seed=3)
+    draws = np.array(list(sampler))
+    assert len(draws) == 1608 and draws.min() >= 0 and draws.max() < 1608
+    real = draws < 8
+    assert abs(real.mean() - 0.5) < 3 * np.sqrt(0.25 / 1608)
+    assert set(draws[real]) == set(range(8))
+    assert list(sampler) == draws.tolist()
+    sampler.set_epoch(1)
+    assert list(sampler) != draws.tolist()
+    assert (np.array(list(MixedSampler([8, 1600], [1.0, 0.0], seed=3))) < 8).all()
+    for sizes, shares in (([8, 0], [0.5, 0.5]), ([8, 16], [0.5]), ([8, 16], [0.0, 0.0])):
+        with pytest.raises(ValueError, match="share"):
+            MixedSampler(sizes, shares, seed=3)

@@ -45,6 +45,8 @@ def test_report_names_the_shifted_class_and_statistic(tmp_path):
     report = unpaired_gap(real, labels, synth, labels, ["a", "b", "c"])
     assert report["classes"]["a"]["mean_image_gap"] == pytest.approx(0.0, abs=1e-6)
     assert report["classes"]["c"]["mean_image_gap"] > 0.3
+    assert report["classes"]["a"]["spread_image_gap"] == pytest.approx(0.0, abs=1e-6)
+    assert report["classes"]["c"]["spread_image_gap"] > 0.3  # the line's row jitter moved with it
     top = report["largest"][0]
     assert (top["class"], top["statistic"]) == ("c", "doppler_centroid") and top["d"] < -5
     assert top["measured"] > 0 > top["synthetic"]  # above zero measured, below it synthetic (noise dilutes both)

@@ -46,3 +46,15 @@ def test_unknown_variant_is_one_line(tmp_path):
     cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", "variants=[cgan]"))
     with pytest.raises(ValueError, match="unknown measured variant 'cgan'"):
         run(cfg, tmp_path / "run")
+
+
+def test_real_share_of_the_batches(tmp_path):
+    measured_stand_in(tmp_path / "data")
+    extra = ("split.per_class=2", "variants=[model_synth]", "synth.measured.fit.grid.chirps_per_frame=[16]",
+             "synth.measured.fit.grid.noise_db=[null]")
+    cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", *extra, "synth.measured.real_share=0.5"))
+    metrics = json.loads((run(cfg, tmp_path / "run") / "metrics.json").read_text())
+    assert set(metrics) == {"val/acc_model_synth", "test/acc_model_synth_test"}
+    cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", *extra, "synth.measured.real_share=1.5"))
+    with pytest.raises(ValueError, match=r"real_share must lie in \(0, 1\)"):
+        run(cfg, tmp_path / "run2")

@@ -2,7 +2,8 @@
 
 - :class:`TrainingRowsDataModule`: the classifiers' and the CGAN's training data, rows of one or
   more dataset files (the real few-shot rows, synthetic datasets) plus in-memory samples (CGAN),
-  as ``(x (B, 1, 64, 32), y (B,))`` batches in the order of :class:`EpochSeededSampler`.
+  as ``(x (B, 1, 64, 32), y (B,))`` batches in the order of :class:`EpochSeededSampler` (or drawn
+  with a fixed share per part, :class:`MixedSampler`).
 - :class:`SpectrogramDataModule`: train / val / test loaders over one file with a seeded stratified
   split (``handradar.data.splits.stratified_partition``), optionally with skeleton windows.
 
@@ -44,6 +45,36 @@ class EpochSeededSampler(Sampler[int]):
         return iter(torch.randperm(self.n, generator=g).tolist())
 
 
+class MixedSampler(Sampler[int]):
+    """``n`` indices into concatenated parts of ``sizes`` rows per epoch: each from part p with probability
+    ``shares[p]`` (normalised), a row of it uniformly, with replacement; a function of (seed, epoch) alone.
+
+    It gives a small part (a few real rows) a fixed share of every batch beside a large one (synthetic rows)."""
+
+    def __init__(self, sizes: Sequence[int], shares: Sequence[float], seed: int) -> None:
+        if len(sizes) != len(shares) or any(s < 0 for s in shares) or sum(shares) <= 0:
+            raise ValueError(f"shares {list(shares)} must be one non-negative number per part, not all 0")
+        if any(n == 0 and p > 0 for n, p in zip(sizes, shares)):
+            raise ValueError(f"a part without rows cannot have a share (sizes {list(sizes)}, shares {list(shares)})")
+        self.sizes, self.seed, self.epoch = [int(n) for n in sizes], int(seed), 0
+        self.p = torch.as_tensor([float(s) for s in shares], dtype=torch.float64) / float(sum(shares))
+        self.offsets = torch.as_tensor(np.concatenate([[0], np.cumsum(self.sizes)[:-1]]), dtype=torch.long)
+        self.n = sum(self.sizes)
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def __iter__(self) -> Iterator[int]:
+        g = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
+        part = torch.multinomial(self.p, self.n, replacement=True, generator=g)
+        within = (torch.rand(self.n, generator=g, dtype=torch.float64) *
+                  torch.as_tensor(self.sizes, dtype=torch.float64)[part]).long()
+        return iter((self.offsets[part] + within).tolist())
+
+
 @dataclass(frozen=True)
 class FileRows:
     """Rows of a dataset file; ``labels`` (one per row) replace the stored ones (e.g. a class subset)."""
@@ -82,11 +113,12 @@ class TrainingRowsDataModule(L.LightningDataModule):
     """Training batches of a classifier or the CGAN from ``parts`` (file rows and arrays), in order.
 
     Every epoch visits the concatenation of the parts in the order of :class:`EpochSeededSampler`
-    (seed, epoch); ``batch_size`` is capped at the number of rows.
+    (seed, epoch), or, with ``shares`` (one per part), as many rows drawn by :class:`MixedSampler`;
+    ``batch_size`` is capped at the number of rows.
     """
 
     def __init__(self, parts: Sequence[FileRows | ArrayRows], *, batch_size: int, seed: int, num_workers: int = 0,
-                 drop_last: bool = False) -> None:
+                 drop_last: bool = False, shares: Sequence[float] | None = None) -> None:
         super().__init__()
         if not parts:
             raise ValueError("a training datamodule needs at least one part")
@@ -96,13 +128,18 @@ class TrainingRowsDataModule(L.LightningDataModule):
         self.dataset = ConcatDataset([_XY(p) if isinstance(p, FileRows) else
                                       TensorDataset(torch.as_tensor(np.asarray(p.x, np.float32))[:, None],
                                                     torch.as_tensor(np.asarray(p.y, np.int64))) for p in self.parts])
+        self.shares = None if shares is None else [float(s) for s in shares]
+        if self.shares is not None:  # checked here, not at the first batch
+            MixedSampler([len(d) for d in self.dataset.datasets], self.shares, self.seed)
 
     def __len__(self) -> int:
         return len(self.dataset)
 
     def train_dataloader(self) -> DataLoader:
         n = len(self.dataset)
-        return DataLoader(self.dataset, batch_size=min(self.batch_size, n), sampler=EpochSeededSampler(n, self.seed),
+        sampler = (EpochSeededSampler(n, self.seed) if self.shares is None else
+                   MixedSampler([len(d) for d in self.dataset.datasets], self.shares, self.seed))
+        return DataLoader(self.dataset, batch_size=min(self.batch_size, n), sampler=sampler,
                           num_workers=self.num_workers, drop_last=self.drop_last,
                           persistent_workers=self.num_workers > 0)
 

@@ -119,8 +119,8 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
               "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
     out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, chain, dict(sim or {}), 'measured/1')}.h5"
     if not out.is_file():
-        log.info("synthesising %d rows per class of %d classes (v_max %.2f m/s, %.1f ms per column)", per_class,
-                 len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3)
+        log.info("synthesising %d rows per class of %d classes (v_max %.2f m/s, %.1f ms per column, %d chirps a frame)",
+                 per_class, len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3, radar.n_loops)
         synthesize_source(source, out, radar=radar, chain=chain, sim=dict(sim or {}) or None,
                           cache_dir=Path(cache_dir) / "profiles", progress=False)
     finish = {k: values.get(k) for k in FINISH_KEYS}

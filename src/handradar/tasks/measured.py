@@ -12,7 +12,8 @@ simulated with the radar and chain that reproduce the dataset's processing
 and ``synth.measured`` for its unknowns. Variants (``MEASURED_VARIANTS``):
 
 - ``radar_only``: the K real rows;
-- ``model_synth``: the K real rows + the synthetic rows;
+- ``model_synth``: the K real rows + the synthetic rows (``synth.measured.real_share``: the real rows' share of
+  every batch; null: their share of the rows);
 - ``model_synth_only``: the synthetic rows alone (K = 0 is this variant alone);
 - ``synth_pretrain``: trained on the synthetic rows, then fine-tuned on the K real rows.
 
@@ -95,7 +96,7 @@ def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
             d = load_arrays(path)
             return d.x, d.y
 
-        log.info("fitting %s on %d measured rows (unpaired: class means)",
+        log.info("fitting %s on %d measured rows (unpaired: class means and spreads)",
                  ", ".join(k for k, v in grid.items() if len(v) > 1), len(fit_rows))
         result = fit_unknowns(job.real.x[fit_rows], job.real.y[fit_rows], n_classes, simulate, grid,
                               n_boot=int(fit["n_boot"]), seed=int(fit["seed"])).as_dict()
@@ -147,6 +148,10 @@ def run_measured(job: Job) -> dict[str, float]:
             out[part] = {"acc": acc, "confusion": cm.tolist()}
         return out
 
+    real_share = cfg.synth.measured.get("real_share")
+    if real_share is not None and not 0.0 < float(real_share) < 1.0:
+        raise ValueError(f"synth.measured.real_share must lie in (0, 1) or be null, found {real_share}")
+    real_share = None if real_share is None else float(real_share)
     results = {}
     for name in names:
         def compute(name: str = name) -> dict:
@@ -155,6 +160,8 @@ def run_measured(job: Job) -> dict[str, float]:
             if name == "synth_pretrain":
                 pre = job.fit_classifier(f"{name}_pretrain", synth_part, n_classes)
                 net = job.fit_classifier(name, real_part, n_classes, init=backbone_state(pre.cpu()))
+            elif name == "model_synth" and real_share is not None and real_part:
+                net = job.fit_classifier(name, real_part + synth_part, n_classes, shares=[real_share, 1.0 - real_share])
             else:
                 parts = {"radar_only": real_part, "model_synth": real_part + synth_part, "model_synth_only": synth_part}[name]
                 net = job.fit_classifier(name, parts, n_classes)

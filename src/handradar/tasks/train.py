@@ -301,9 +301,11 @@ class Job:
         return "cuda" if accel in ("gpu", "cuda", "auto") and torch.cuda.is_available() else "cpu"
 
     def fit_classifier(self, name: str, parts: list[FileRows | ArrayRows], num_classes: int, *,
-                       init: dict[str, torch.Tensor] | None = None, overrides: dict | None = None) -> torch.nn.Module:
+                       init: dict[str, torch.Tensor] | None = None, overrides: dict | None = None,
+                       shares: list[float] | None = None) -> torch.nn.Module:
         """Train ``model.net`` on the training ``parts`` (through a DataModule), resumably; the same
-        initial weights for every variant of a seed."""
+        initial weights for every variant of a seed. ``shares``: each part's share of the batches (None: as many
+        as its rows)."""
         cfg = self.cfg
         pl.seed_everything(self.seed, verbose=False)
         net = instantiate(cfg.model.net, num_classes=num_classes)
@@ -314,7 +316,7 @@ class Job:
         scheduler = instantiate(cfg.model.scheduler) if cfg.model.get("scheduler") else None
         module = ClassifierModule(net, num_classes, instantiate(cfg.model.optimizer), scheduler, prefix=f"{name}/")
         data = TrainingRowsDataModule(parts, batch_size=int(cfg.data.batch_size), seed=self.seed,
-                                      num_workers=int(cfg.data.num_workers))
+                                      num_workers=int(cfg.data.num_workers), shares=shares)
         ckpt_dir = self.state / name / "checkpoints"
         trainer = make_trainer(cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
                                callbacks=self._callbacks(), overrides=overrides,
