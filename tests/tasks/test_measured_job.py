@@ -39,6 +39,9 @@ def test_measured_job(tmp_path):
     cfg0 = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", "split.per_class=0"))
     metrics0 = json.loads((run(cfg0, tmp_path / "run0") / "metrics.json").read_text())
     assert set(metrics0) == {"val/acc_model_synth_only", "test/acc_model_synth_only_test"}
+    # the synthetic-only classifier is shared by every K of a seed: cached beside the synthetic rows, not retrained
+    assert metrics0["test/acc_model_synth_only_test"] == metrics["test/acc_model_synth_only_test"]
+    assert len(list((tmp_path / "cache" / "synth").glob("measured-synth-*-classifier-*.pt"))) == 1
 
 
 def test_unknown_variant_is_one_line(tmp_path):

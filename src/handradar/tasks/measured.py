@@ -29,9 +29,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import torch
+from hydra.utils import instantiate
 from omegaconf import OmegaConf
 
-from handradar.atomic import atomic_write_text
+from handradar.atomic import atomic_path, atomic_write_text
 from handradar.data.datamodule import FileRows
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import UNKNOWN
@@ -152,19 +154,37 @@ def run_measured(job: Job) -> dict[str, float]:
     if real_share is not None and not 0.0 < float(real_share) < 1.0:
         raise ValueError(f"synth.measured.real_share must lie in (0, 1) or be null, found {real_share}")
     real_share = None if real_share is None else float(real_share)
+    real_part = [FileRows(real.path, train)] if len(train) else []
+    synth_part = [FileRows(synthetic)] if synthetic is not None else []
+
+    def synthetic_only():
+        """The classifier of the synthetic rows alone (``model_synth_only``, and where ``synth_pretrain`` starts): it
+        depends on the synthetic rows, the seed, the model and the trainer only, so it is cached beside the rows and
+        shared by the jobs of every K."""
+        setup = [OmegaConf.to_container(cfg[k], resolve=True) for k in ("model", "trainer")]
+        key = config_hash(setup, int(cfg.data.batch_size), job.seed, n_classes)
+        f = Path(cfg.synth.cache_dir) / f"{synthetic.stem}-classifier-{key}.pt"
+        if f.is_file():
+            net = instantiate(cfg.model.net, num_classes=n_classes)
+            net.load_state_dict(torch.load(f, weights_only=True))
+            return net
+        net = job.fit_classifier("model_synth_only", synth_part, n_classes)
+        if job.rank_zero:
+            with atomic_path(f) as tmp:
+                torch.save(net.state_dict(), tmp)
+        return net
+
     results = {}
     for name in names:
         def compute(name: str = name) -> dict:
-            real_part = [FileRows(real.path, train)] if len(train) else []
-            synth_part = [FileRows(synthetic)] if synthetic is not None else []
             if name == "synth_pretrain":
-                pre = job.fit_classifier(f"{name}_pretrain", synth_part, n_classes)
-                net = job.fit_classifier(name, real_part, n_classes, init=backbone_state(pre.cpu()))
+                net = job.fit_classifier(name, real_part, n_classes, init=backbone_state(synthetic_only().cpu()))
+            elif name == "model_synth_only":
+                net = synthetic_only()
             elif name == "model_synth" and real_share is not None and real_part:
                 net = job.fit_classifier(name, real_part + synth_part, n_classes, shares=[real_share, 1.0 - real_share])
             else:
-                parts = {"radar_only": real_part, "model_synth": real_part + synth_part, "model_synth_only": synth_part}[name]
-                net = job.fit_classifier(name, parts, n_classes)
+                net = job.fit_classifier(name, real_part + (synth_part if name == "model_synth" else []), n_classes)
             return {"scores": score(net), "n_real": int(len(train)), "classes": real.classes}
 
         results[name] = job.cached(name, compute)
