@@ -11,8 +11,9 @@ hash, so a re-run job counts once) and writes:
   and ``handradar.machine`` tags; for runs logged before those tags, the command from the run folder's
   ``.hydra/overrides.yaml`` where it still exists), as published (handradar.runs.tables.published: no path
   of the machine that ran them; a row from a dirty tree marked);
-- into DIR (default logs/results): ``table2_few_shot.csv`` etc. with mean, std and n columns, and
-  ``confusion/<preset>[_fixed]_<variant>.png``, confusion matrices summed over seeds.
+- into DIR (default logs/results): ``table2_few_shot.csv`` etc. with mean, std and n columns,
+  ``confusion/<preset>[_fixed]_<variant>.png``, confusion matrices summed over seeds, and, when measured
+  runs exist, ``measured_curve.png`` (accuracy against real rows per class, ``--measured-figure``).
 
 The last line printed is the path of FILE.
 """
@@ -79,12 +80,22 @@ def main(argv: list[str] | None = None) -> Path:
     ap.add_argument("--doc", type=Path, default=REPO_ROOT / "docs" / "results.md", help="the results markdown")
     ap.add_argument("--no-figures", action="store_true", help="skip the confusion-matrix PNGs")
     ap.add_argument("--log-dir", type=Path, default=REPO_ROOT / "logs", help="where the jobs' state folders are")
+    ap.add_argument("--measured-figure", type=Path, default=None,
+                    help="the measured curve's PNG (default DIR/measured_curve.png), when measured runs exist")
+    ap.add_argument("--anchor", action="append", default=[], metavar="SPLIT=ACC",
+                    help="a published accuracy drawn on the measured curve's panel of that test split (repeatable)")
     args = ap.parse_args(argv)
     records = load_records(args.tracking_uri)
     tables = build_tables(records)
     args.out.mkdir(parents=True, exist_ok=True)
     for t in tables:
         atomic_write_text(args.out / f"{t.name}.csv", t.csv())
+        if t.name == "measured":
+            from handradar.viz.measured import plot_measured_curve
+
+            anchors = {a.split("=", 1)[0]: float(a.split("=", 1)[1]) for a in args.anchor}
+            plot_measured_curve(t.rows, args.measured_figure or args.out / "measured_curve.png", anchors=anchors,
+                                title="measured test splits: mean ± std over seeds")
     db = sqlite_path(args.tracking_uri)
     source = args.tracking_uri if db is None else _relative(db)
     md = results_markdown(tables, f"`{source}` ({len(records)} jobs)")
