@@ -73,8 +73,10 @@ def test_fit_recovers_known_unknowns(tmp_path):
 
     grid = {"v_max_m_s": [0.5, 2.0, 4.0], "frame_period_s": [0.04, 0.08], "chirps_per_frame": [16, 32],
             "dynamic_range_db": [10.0, 20.0, 40.0], "approaching": ["high", "low"]}
-    fit = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulate, grid, n_boot=50, seed=0)
-    assert fit.values == {**TRUTH, "noise_db": None, "noise_looks": 1}
+    for objective in ("means", "moments"):
+        fit = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulate, grid, n_boot=50, seed=0,
+                           objective=objective)
+        assert fit.values == {**TRUTH, "noise_db": None, "noise_looks": 1}, objective
     assert fit.shares["approaching"]["low"] > 0.9 and fit.n_rows == 24
     # v_max 0.5 m/s needs loops of 1.95 ms: 32 of them fit in no 40 ms frame, so that radar is no candidate (16 do)
     assert not any(c["v_max_m_s"] == 0.5 and c["frame_period_s"] == 0.04 and c["chirps_per_frame"] == 32
@@ -137,8 +139,11 @@ def test_fit_recovers_a_noise_floor(tmp_path):
 
     grid = {"v_max_m_s": [2.0], "frame_period_s": [0.04], "chirps_per_frame": [16], "dynamic_range_db": [20.0, 40.0],
             "approaching": ["low"], "noise_db": [None, -40.0, -25.0, -10.0], "noise_looks": [1, 8]}
-    fit = fit_unknowns(measured_x, sim.y, len(CLASSES), simulate, grid, n_boot=20, seed=0)
+    fit = fit_unknowns(measured_x, sim.y, len(CLASSES), simulate, grid, n_boot=20, seed=0, objective="moments")
     assert (fit.values["noise_db"], fit.values["noise_looks"]) == (-25.0, 8)
+    assert fit.as_dict()["objective"].startswith("1 - SSIM of class-mean and class-spread")
+    with pytest.raises(ValueError, match="unknown fit objective 'medians'"):
+        fit_unknowns(measured_x, sim.y, len(CLASSES), simulate, grid, objective="medians")
     # without noise, its looks are no separate candidates: 2 floors x (1 noise-free + 3 levels x 2 looks)
     assert len(fit.candidates) == 2 * (1 + 3 * 2)
 

@@ -48,7 +48,10 @@ from handradar.synthesis.providers import synthesize_source
 log = logging.getLogger(__name__)
 
 DEEP_FLOOR_DB = 60.0  # the floor rows are synthesised at before the fit re-floors them
-OBJECTIVE = "1 - SSIM of class-mean and class-spread images, mean over both and over classes"
+OBJECTIVES = {  # what fit_unknowns compares, 1 - SSIM averaged over its images
+    "means": "1 - SSIM of class-mean images, mean over classes",
+    "moments": "1 - SSIM of class-mean and class-spread images, mean over both and over classes",
+}
 
 
 def mirror_doppler(x: np.ndarray) -> np.ndarray:
@@ -165,14 +168,18 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     return finished
 
 
-def class_moments(x: np.ndarray, y: np.ndarray, n_classes: int) -> np.ndarray:
-    """(2 n_classes, doppler, columns): each class's mean image, then its per-pixel standard deviation (the spread
-    is what tells a noise floor's texture apart from its level); a class without rows is an error."""
+def class_moments(x: np.ndarray, y: np.ndarray, n_classes: int, objective: str = "moments") -> np.ndarray:
+    """Each class's mean image (n_classes, doppler, columns), then, for ``objective`` "moments", its per-pixel
+    standard deviation (2 n_classes images: the spread tells a noise floor's texture apart from its level); a class
+    without rows is an error."""
+    if objective not in OBJECTIVES:
+        raise ValueError(f"unknown fit objective {objective!r}; expected one of {sorted(OBJECTIVES)}")
     counts = np.bincount(y, minlength=n_classes)
     if counts.min() == 0:
         raise ValueError(f"class {int(np.argmin(counts))} has no row to take a mean of")
-    return np.concatenate([np.stack([x[y == c].mean(axis=0) for c in range(n_classes)]),
-                           np.stack([x[y == c].std(axis=0) for c in range(n_classes)])])
+    means = [np.stack([x[y == c].mean(axis=0) for c in range(n_classes)])]
+    spreads = [np.stack([x[y == c].std(axis=0) for c in range(n_classes)])] if objective == "moments" else []
+    return np.concatenate(means + spreads)
 
 
 @dataclass
@@ -184,15 +191,17 @@ class UnknownsFit:
     shares: dict[str, dict]         # unknown -> {candidate value: share of bootstrap resamples choosing it}
     ranges: dict[str, list]         # numeric unknown -> [2.5 %, 97.5 %] of the bootstrap's chosen values
     n_rows: int
+    objective: str = "moments"
 
     @classmethod
     def from_dict(cls, d: Mapping) -> UnknownsFit:
         """The fit :meth:`as_dict` wrote (the cached ``measured-fit-<hash>.json``)."""
-        return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows")})
+        return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows")},
+                   objective=next(k for k, v in OBJECTIVES.items() if v == d.get("objective", OBJECTIVES["moments"])))
 
     def as_dict(self) -> dict:
         return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
-                "n_rows": self.n_rows, "objective": OBJECTIVE}
+                "n_rows": self.n_rows, "objective": OBJECTIVES[self.objective]}
 
     def summary(self) -> str:
         parts = []
@@ -206,7 +215,7 @@ class UnknownsFit:
 def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                  simulate: Callable[[dict], tuple[np.ndarray, np.ndarray] | None],
                  grid: Mapping[str, Sequence], *, n_boot: int = 200, boot_candidates: int = 16,
-                 seed: int = 0) -> UnknownsFit:
+                 seed: int = 0, objective: str = "moments") -> UnknownsFit:
     """Choose the unknowns whose synthetic class means and spreads are closest to the measured ones (module docstring).
 
     simulate({v_max_m_s, frame_period_s, chirps_per_frame}) -> (x, y): synthetic rows at a floor of
@@ -214,7 +223,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     grid: candidate lists for ``v_max_m_s``, ``frame_period_s``, ``dynamic_range_db`` (each <= DEEP_FLOOR_DB),
     ``approaching`` (``high`` / ``low``) and optionally ``chirps_per_frame`` (None: as many as Doppler bins),
     ``noise_db`` (None: no noise) and ``noise_looks`` (default 1); a single-value list fixes that unknown. The
-    bootstrap re-ranks the ``boot_candidates`` best candidates of the full fit.
+    bootstrap re-ranks the ``boot_candidates`` best candidates of the full fit. ``objective``: :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
     names = ("v_max_m_s", "frame_period_s", "chirps_per_frame", "noise_db", "noise_looks", "dynamic_range_db",
@@ -238,7 +247,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
             values = {**radar, "noise_db": noise, "noise_looks": int(looks), "dynamic_range_db": float(floor),
                       "approaching": str(approaching)}
             combos.append(values)
-            synth_moments.append(class_moments(finish_rows(x, values, seed), y, n_classes))
+            synth_moments.append(class_moments(finish_rows(x, values, seed), y, n_classes, objective))
     if not combos:
         raise ValueError("no candidate of the grid could be simulated")
     synth_moments = np.stack(synth_moments)  # (combos, 2 classes, doppler, columns)
@@ -248,7 +257,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
         s = per_example_ssim(flat, synth_moments[which].reshape(-1, *real_moments.shape[-2:])).reshape(len(which), -1)
         return 1.0 - s.mean(axis=1)
 
-    gaps = objectives(class_moments(real_x, real_y, n_classes), np.arange(len(combos)))
+    gaps = objectives(class_moments(real_x, real_y, n_classes, objective), np.arange(len(combos)))
     best = int(np.argmin(gaps))
     # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
     # behind on all rows is not chosen by a resample of them
@@ -258,8 +267,8 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     chosen = []
     for _ in range(n_boot):
         rows = np.concatenate([rng.choice(m, size=len(m)) for m in members])
-        chosen.append(int(contenders[np.argmin(objectives(class_moments(real_x[rows], real_y[rows], n_classes),
-                                                            contenders))]))
+        resampled = class_moments(real_x[rows], real_y[rows], n_classes, objective)
+        chosen.append(int(contenders[np.argmin(objectives(resampled, contenders))]))
     shares = {k: {} for k in names}
     for i in chosen:
         for k in names:
@@ -269,4 +278,4 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
               for k in names if k != "approaching" and all(combos[i][k] is not None for i in chosen)}
     candidates = [{**c, "gap": float(g)} for c, g in zip(combos, gaps)]
     return UnknownsFit(values=dict(combos[best]), candidates=candidates, shares=shares, ranges=ranges,
-                       n_rows=int(len(real_y)))
+                       n_rows=int(len(real_y)), objective=objective)

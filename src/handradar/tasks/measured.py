@@ -44,6 +44,7 @@ from handradar.models.classifiers import backbone_state
 from handradar.provenance import config_hash
 from handradar.synthesis.measured import (
     DEEP_FLOOR_DB,
+    OBJECTIVES,
     UnknownsFit,
     fit_unknowns,
     measured_manifest,
@@ -98,10 +99,11 @@ def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
             d = load_arrays(path)
             return d.x, d.y
 
-        log.info("fitting %s on %d measured rows (unpaired: class means and spreads)",
-                 ", ".join(k for k, v in grid.items() if len(v) > 1), len(fit_rows))
+        log.info("fitting %s on %d measured rows (unpaired: %s)", ", ".join(k for k, v in grid.items() if len(v) > 1),
+                 len(fit_rows), OBJECTIVES[str(fit.get("objective", "moments"))])
         result = fit_unknowns(job.real.x[fit_rows], job.real.y[fit_rows], n_classes, simulate, grid,
-                              n_boot=int(fit["n_boot"]), seed=int(fit["seed"])).as_dict()
+                              n_boot=int(fit["n_boot"]), seed=int(fit["seed"]),
+                              objective=str(fit.get("objective", "moments"))).as_dict()
         atomic_write_text(out, json.dumps(result, indent=1))
     log.info("fitted: %s", UnknownsFit.from_dict(result).summary())
     job.tracker.log_params({f"synth.fitted.{k}": v for k, v in result["values"].items()})
