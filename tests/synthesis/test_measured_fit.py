@@ -17,7 +17,6 @@ from handradar.radar.chain import ChainConfig, power_to_unit
 from handradar.synthesis.measured import (
     DEEP_FLOOR_DB,
     add_noise_floor,
-    doppler_spread,
     finish_rows,
     fit_unknowns,
     mirror_doppler,
@@ -155,17 +154,3 @@ def test_mirror_doppler_about_the_zero_row():
     y = mirror_doppler(x)
     assert y[0, 32 - 7, 1] == 1.0 and y[0, 32, 2] == 2.0
     assert np.array_equal(mirror_doppler(y), x)
-
-
-def test_doppler_spread_closed_form():
-    """A line in one Doppler row spread by a Gaussian of sigma rows: d rows away its power is exp(-d^2 / (2 sigma^2))
-    of the peak, -10 log10(e) d^2 / (2 sigma^2) dB; wrapped about the axis's ends; sigma 0 leaves the row as it is."""
-    x = np.zeros((3, 64, 8), np.float32)
-    x[:, 2, 3] = 1.0  # near the low end: the spread wraps to rows 62, 63
-    y = doppler_spread(x, np.array([2.0, 4.0, 0.0]))
-    for row, sigma in ((0, 2.0), (1, 4.0)):
-        for d in (-4, -3, 1, 2, 5):
-            expected = -10 * np.log10(np.e) * d**2 / (2 * sigma**2)
-            assert y[row, (2 + d) % 64, 3] * DEEP_FLOOR_DB - DEEP_FLOOR_DB == pytest.approx(expected, abs=1e-3)
-    np.testing.assert_allclose(y[2], x[2], atol=1e-9)  # the FFT's round trip only
-    assert finish_rows(x, {"doppler_spread_rows": 0.0}, 0).tobytes() == x.tobytes()  # 0: not applied at all

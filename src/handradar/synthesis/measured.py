@@ -94,36 +94,13 @@ def add_noise_floor(x: np.ndarray, noise_db: float, rng: np.random.Generator, lo
     return np.clip((db - top + d0) / d0, 0.0, 1.0).astype(np.float32)
 
 
-def doppler_spread(x: np.ndarray, sigma_rows: np.ndarray) -> np.ndarray:
-    """Rows at a ``DEEP_FLOOR_DB`` floor with each row's power spread along Doppler by a Gaussian of ``sigma_rows``
-    (one per row, in Doppler bins; 0: unchanged), circularly (the Doppler axis is an FFT's), rescaled to the new peak.
-
-    What the simulated hand lacks and a measured one has: the forearm, the body and many surface points moving at
-    velocities around the hand's, which widen every line of a measured gesture."""
-    d = x.shape[-2]
-    offsets = np.minimum(np.arange(d), d - np.arange(d))  # circular distance from row 0
-    sigma = np.asarray(sigma_rows, dtype=np.float64).reshape(-1, 1)
-    kernel = np.where(sigma > 0, np.exp(-0.5 * (offsets / np.maximum(sigma, 1e-9)) ** 2), (offsets == 0).astype(float))
-    kernel /= kernel.sum(axis=1, keepdims=True)
-    d0 = DEEP_FLOOR_DB
-    power = 10.0 ** ((x.astype(np.float64) * d0 - d0) / 10.0)
-    spread = np.fft.ifft(np.fft.fft(power, axis=-2) * np.fft.fft(kernel, axis=-1)[:, :, None], axis=-2).real
-    db = 10.0 * np.log10(np.maximum(spread, 1e-30))
-    top = db.max(axis=(-2, -1), keepdims=True)
-    return np.clip((db - top + d0) / d0, 0.0, 1.0).astype(np.float32)
-
-
-FINISH_KEYS = ("doppler_spread_rows", "noise_db", "noise_looks", "dynamic_range_db", "approaching")  # finish_rows
+FINISH_KEYS = ("noise_db", "noise_looks", "dynamic_range_db", "approaching")  # what finish_rows applies
 
 
 def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: int) -> np.ndarray:
-    """Rows simulated at a ``DEEP_FLOOR_DB`` floor, approaching high, as ``values`` says the dataset shows them: a
-    Doppler spread drawn per row uniformly up to ``doppler_spread_rows`` (None or 0: none; a randomisation of the
-    synthetic rows, :func:`doppler_spread`), receiver noise (``noise_db``, None: none; ``noise_looks`` cells averaged
-    per pixel, default 1), the dB floor (``dynamic_range_db``), the approaching end (``approaching``)."""
-    if values.get("doppler_spread_rows"):
-        rng = np.random.default_rng([int(seed), 11])
-        x = doppler_spread(x, rng.uniform(0.0, float(values["doppler_spread_rows"]), len(x)))
+    """Rows simulated at a ``DEEP_FLOOR_DB`` floor, approaching high, as ``values`` says the dataset shows them: receiver
+    noise (``noise_db``, None: none; ``noise_looks`` cells averaged per pixel, default 1), the dB floor
+    (``dynamic_range_db``), the approaching end (``approaching``)."""
     if values.get("noise_db") is not None:
         x = add_noise_floor(x, float(values["noise_db"]), np.random.default_rng([int(seed), 7]),
                             int(values.get("noise_looks") or 1))
@@ -136,8 +113,8 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
                         cache_dir: str | Path, sim: Mapping | None = None) -> Path:
     """Synthetic rows of a measured dataset's classes, cached by everything that makes them. ``values`` holds the
     manifest's unknowns: ``v_max_m_s``, ``frame_period_s`` and ``chirps_per_frame`` set the simulated radar;
-    ``doppler_spread_rows``, ``noise_db``, ``noise_looks``, ``dynamic_range_db`` and ``approaching`` are applied to the
-    rows simulated at a deep floor (:func:`finish_rows`)."""
+    ``noise_db``, ``noise_looks``, ``dynamic_range_db`` and ``approaching`` are applied to the rows simulated at a deep
+    floor (:func:`finish_rows`)."""
     m, shape = measured_manifest(real_path)
     radar = synthesis_radar(m, shape, values)
     chain = replace(dataset_chain(m, shape, radar.n_loops), dynamic_range_db=DEEP_FLOOR_DB)
@@ -154,8 +131,6 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
         finish["dynamic_range_db"] = None  # the simulated floor already
     if finish["noise_db"] is None:
         finish["noise_looks"] = None  # no noise: its looks change nothing
-    if not finish["doppler_spread_rows"]:
-        finish["doppler_spread_rows"] = None
     if all(v in (None, "high") for v in finish.values()):
         return out
     finished = out.with_name(f"{out.stem}-{config_hash(finish, seed)}.h5")

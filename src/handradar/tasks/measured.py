@@ -135,9 +135,7 @@ def run_measured(job: Job) -> dict[str, float]:
             raise ValueError(f"synth.measured.fit.rows must be pool or train, found {fit_on!r}")
         fit_rows = train if fit_on == "train" else measured_split(real.y, split_of, per_class="all", seed=0, **split)[0]
         values = fitted_unknowns(job, fit_rows)
-        spread = cfg.synth.measured.get("doppler_spread_rows")  # a randomisation, chosen on validation: not fitted
-        synthetic = synthesize_measured(real.path, {**values, "doppler_spread_rows": spread},
-                                        per_class=int(cfg.synth.measured.per_class), seed=job.seed,
+        synthetic = synthesize_measured(real.path, values, per_class=int(cfg.synth.measured.per_class), seed=job.seed,
                                         cache_dir=Path(cfg.synth.cache_dir),
                                         sim=OmegaConf.to_container(cfg.sim, resolve=True))
         synth = load_arrays(synthetic)
