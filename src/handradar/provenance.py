@@ -54,8 +54,9 @@ def commit_of(version: str) -> str:
 
 
 def _canonical(obj: object) -> object:
-    if hasattr(obj, "__dataclass_fields__"):
-        return {k: _canonical(getattr(obj, k)) for k in obj.__dataclass_fields__ if k != "source"}
+    if hasattr(obj, "__dataclass_fields__"):  # a field added later with metadata {"hash_if_set": True} counts when set
+        return {k: _canonical(getattr(obj, k)) for k, f in obj.__dataclass_fields__.items()
+                if k != "source" and not (f.metadata.get("hash_if_set") and getattr(obj, k) is None)}
     if isinstance(obj, dict):
         return {str(k): _canonical(v) for k, v in sorted(obj.items(), key=lambda kv: str(kv[0]))}
     if isinstance(obj, (list, tuple)):

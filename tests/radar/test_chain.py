@@ -286,3 +286,12 @@ def test_fewer_chirps_widen_the_zero_doppler_line_as_the_window_says():
     assert half_bin == pytest.approx(-1.8, abs=0.1)
     assert line(32)[0] == pytest.approx(10 * np.log10((0.23 / 0.54) ** 2), abs=1e-6)  # a whole bin: -7.4 dB
     assert line(64)[1] == pytest.approx(10 * np.log10((0.23 / 0.54) ** 2), abs=1e-6) and line(64)[0] < -200
+
+
+def test_an_unset_doppler_bins_keeps_earlier_cache_keys():
+    """doppler_bins came after caches keyed by the chain: unset, the chain hashes as before it existed."""
+    from handradar.provenance import config_hash
+
+    before = {k: getattr(ChainConfig(), k) for k in ChainConfig.__dataclass_fields__ if k != "doppler_bins"}
+    assert config_hash(ChainConfig()) == config_hash(before)
+    assert config_hash(ChainConfig(doppler_bins=128)) != config_hash(ChainConfig())

@@ -27,7 +27,7 @@ All functions are plain torch and differentiable; none holds state.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.signal
@@ -62,7 +62,7 @@ class ChainConfig:
     stft_window: str = "hamming"
     stft_len: int = 64
     stft_hop: int = 64
-    doppler_bins: int | None = None
+    doppler_bins: int | None = field(default=None, metadata={"hash_if_set": True})  # unset: earlier cache keys hold
     n_columns: int = 32
     dynamic_range_db: float = 30.0
     clutter_removal: bool = True
