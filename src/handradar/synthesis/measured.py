@@ -6,9 +6,10 @@ radar whose frame-based Doppler map has the dataset's grid (handradar.data.measu
 
 The fit (:func:`fit_unknowns`, docs/datasets.md#measured-radar-datasets): no measured row has a
 skeleton, so nothing is paired. For every candidate of the unknowns the synthetic rows' class-mean
-and class-spread images (per-pixel standard deviation) are compared with the measured rows': the
-objective is 1 - SSIM averaged over both images of every class (torchmetrics SSIM, ``data_range=1.0``).
-The spread is what tells a noise floor's texture (its looks) apart from its level. Two unknowns cost
+images (objective ``means``), or class-mean and class-spread images (per-pixel standard deviation,
+``moments``), are compared with the measured rows': 1 - SSIM averaged over the images (torchmetrics
+SSIM, ``data_range=1.0``). The spread is what tells a noise floor's texture (its looks) apart from its
+level. Two unknowns cost
 no new simulation and are exact:
 
 - the dB floor: rows synthesised with a deep floor D0 are re-floored at any D <= D0 by
@@ -143,7 +144,7 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     return finished
 
 
-def class_moments(x: np.ndarray, y: np.ndarray, n_classes: int, objective: str = "moments") -> np.ndarray:
+def class_moments(x: np.ndarray, y: np.ndarray, n_classes: int, objective: str = "means") -> np.ndarray:
     """Each class's mean image (n_classes, doppler, columns), then, for ``objective`` "moments", its per-pixel
     standard deviation (2 n_classes images: the spread tells a noise floor's texture apart from its level); a class
     without rows is an error."""
@@ -166,13 +167,13 @@ class UnknownsFit:
     shares: dict[str, dict]         # unknown -> {candidate value: share of bootstrap resamples choosing it}
     ranges: dict[str, list]         # numeric unknown -> [2.5 %, 97.5 %] of the bootstrap's chosen values
     n_rows: int
-    objective: str = "moments"
+    objective: str = "means"
 
     @classmethod
     def from_dict(cls, d: Mapping) -> UnknownsFit:
         """The fit :meth:`as_dict` wrote (the cached ``measured-fit-<hash>.json``)."""
         return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows")},
-                   objective=next(k for k, v in OBJECTIVES.items() if v == d.get("objective", OBJECTIVES["moments"])))
+                   objective=next(k for k, v in OBJECTIVES.items() if v == d.get("objective", OBJECTIVES["means"])))
 
     def as_dict(self) -> dict:
         return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
@@ -190,8 +191,8 @@ class UnknownsFit:
 def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                  simulate: Callable[[dict], tuple[np.ndarray, np.ndarray] | None],
                  grid: Mapping[str, Sequence], *, n_boot: int = 200, boot_candidates: int = 16,
-                 seed: int = 0, objective: str = "moments") -> UnknownsFit:
-    """Choose the unknowns whose synthetic class means and spreads are closest to the measured ones (module docstring).
+                 seed: int = 0, objective: str = "means") -> UnknownsFit:
+    """Choose the unknowns whose synthetic class means (and spreads) are closest to the measured ones (module docstring).
 
     simulate({v_max_m_s, frame_period_s, chirps_per_frame}) -> (x, y): synthetic rows at a floor of
     ``DEEP_FLOOR_DB``, approaching high; None where that radar is no candidate (a frame too short for its chirps).
@@ -225,7 +226,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
             synth_moments.append(class_moments(finish_rows(x, values, seed), y, n_classes, objective))
     if not combos:
         raise ValueError("no candidate of the grid could be simulated")
-    synth_moments = np.stack(synth_moments)  # (combos, 2 classes, doppler, columns)
+    synth_moments = np.stack(synth_moments)  # (combos, classes or 2 classes, doppler, columns)
 
     def objectives(real_moments: np.ndarray, which: np.ndarray) -> np.ndarray:
         flat = np.broadcast_to(real_moments, synth_moments[which].shape).reshape(-1, *real_moments.shape[-2:])

@@ -100,10 +100,10 @@ def fitted_unknowns(job: Job, fit_rows: np.ndarray) -> dict:
             return d.x, d.y
 
         log.info("fitting %s on %d measured rows (unpaired: %s)", ", ".join(k for k, v in grid.items() if len(v) > 1),
-                 len(fit_rows), OBJECTIVES[str(fit.get("objective", "moments"))])
+                 len(fit_rows), OBJECTIVES[str(fit.get("objective", "means"))])
         result = fit_unknowns(job.real.x[fit_rows], job.real.y[fit_rows], n_classes, simulate, grid,
                               n_boot=int(fit["n_boot"]), seed=int(fit["seed"]),
-                              objective=str(fit.get("objective", "moments"))).as_dict()
+                              objective=str(fit.get("objective", "means"))).as_dict()
         atomic_write_text(out, json.dumps(result, indent=1))
     log.info("fitted: %s", UnknownsFit.from_dict(result).summary())
     job.tracker.log_params({f"synth.fitted.{k}": v for k, v in result["values"].items()})
