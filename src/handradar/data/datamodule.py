@@ -40,12 +40,15 @@ class EpochSeededSampler(Sampler[int]):
     def __len__(self) -> int:
         return self.n
 
+    def generator(self) -> torch.Generator:
+        """The random stream of the current (seed, epoch)."""
+        return torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
+
     def __iter__(self) -> Iterator[int]:
-        g = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
-        return iter(torch.randperm(self.n, generator=g).tolist())
+        return iter(torch.randperm(self.n, generator=self.generator()).tolist())
 
 
-class MixedSampler(Sampler[int]):
+class MixedSampler(EpochSeededSampler):
     """``n`` indices into concatenated parts of ``sizes`` rows per epoch: each from part p with probability
     ``shares[p]`` (normalised), a row of it uniformly, with replacement; a function of (seed, epoch) alone.
 
@@ -56,19 +59,13 @@ class MixedSampler(Sampler[int]):
             raise ValueError(f"shares {list(shares)} must be one non-negative number per part, not all 0")
         if any(n == 0 and p > 0 for n, p in zip(sizes, shares)):
             raise ValueError(f"a part without rows cannot have a share (sizes {list(sizes)}, shares {list(shares)})")
-        self.sizes, self.seed, self.epoch = [int(n) for n in sizes], int(seed), 0
+        self.sizes = [int(n) for n in sizes]
+        super().__init__(sum(self.sizes), seed)
         self.p = torch.as_tensor([float(s) for s in shares], dtype=torch.float64) / float(sum(shares))
         self.offsets = torch.as_tensor(np.concatenate([[0], np.cumsum(self.sizes)[:-1]]), dtype=torch.long)
-        self.n = sum(self.sizes)
-
-    def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
-
-    def __len__(self) -> int:
-        return self.n
 
     def __iter__(self) -> Iterator[int]:
-        g = torch.Generator().manual_seed(self.seed * 1_000_003 + self.epoch)
+        g = self.generator()
         part = torch.multinomial(self.p, self.n, replacement=True, generator=g)
         within = (torch.rand(self.n, generator=g, dtype=torch.float64) *
                   torch.as_tensor(self.sizes, dtype=torch.float64)[part]).long()
