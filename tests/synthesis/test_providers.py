@@ -242,6 +242,8 @@ def test_handradar_synth_on_the_motion_library(tmp_path):
         spec = h5["spectrograms"][()]
     assert spec.shape == (4, 64, 8) and spec.max() == 1.0
     assert not np.allclose(spec[0], spec[2], atol=0.05)  # a push is not a circle
+    # modelling only: the slots are summed as simulated, no slot-profile cache (2.5 MB a row) is written
+    assert not list((tmp_path / "cache").rglob("slot_profiles-*"))
 
 
 def test_handradar_synth_on_sfinge3d_subset(sfinge3d_dir, tmp_path):

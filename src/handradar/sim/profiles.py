@@ -20,7 +20,8 @@ Public API:
 
     window_chirp_times(radar, chain) -> np.ndarray (F, L, C) seconds from the window start
     scatterer_profiles(scat, times (T,) | (B, T), chirp_times (F, L, C), radar, chain, *,
-                       tx_power_w, gain_tx_dbi, gain_rx_dbi) -> (B, 39, F, L, C * n_rx, bins) complex
+                       tx_power_w, gain_tx_dbi, gain_rx_dbi, summed=False) -> (B, 39, F, L, C * n_rx, bins) complex
+                       (summed: (B, F, L, C * n_rx, bins), the slots' sum)
     combine_slots(slot_profiles (B, 39, F, L, Ch, bins) complex | (..., 2) real view, weights (B, 38, F, L, C)
         | None, n_rx, active (38,) bool | None) -> (B, F, L, Ch, bins) complex: sum_k w_k P_k + unweighted slot
 """
@@ -46,8 +47,9 @@ def window_chirp_times(radar: RadarConfig, chain: ChainConfig) -> np.ndarray:
 
 def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch.Tensor | np.ndarray,
                        radar: RadarConfig, chain: ChainConfig, *, tx_power_w: float, gain_tx_dbi: float,
-                       gain_rx_dbi: float) -> torch.Tensor:
-    """Per-slot range profiles (B, 39, F, L, C * n_rx, gated bins), complex (see module doc)."""
+                       gain_rx_dbi: float, summed: bool = False) -> torch.Tensor:
+    """Per-slot range profiles (B, 39, F, L, C * n_rx, gated bins), complex (see module doc); ``summed``: their
+    sum over the slots (B, F, L, C * n_rx, gated bins), every point at weight 1, built without the slots."""
     dtype = scat.tx.dtype
     cdtype = torch.complex128 if dtype == torch.float64 else torch.complex64
     dev = scat.tx.device
@@ -83,6 +85,9 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     prof = range_response(beat, bins, radar.n_samples, chain.range_window, carrier).to(cdtype)  # (B, K, M, nb)
 
     bsz, m = prof.shape[0], prof.shape[2]
+    if summed:
+        total = prof.sum(1).reshape(bsz, f, l, c, 1, -1).expand(-1, -1, -1, -1, radar.n_rx, -1)
+        return total.reshape(bsz, f, l, c * radar.n_rx, -1)
     if owner.shape[0] == N_SLOTS and bool((owner == torch.arange(N_SLOTS, device=dev)).all()):
         slots = torch.cat([prof, prof.new_zeros(bsz, 1, m, prof.shape[-1])], dim=1)
     elif owner.shape[0] <= N_SLOTS and bool((owner[1:] > owner[:-1]).all()):  # distinct slots: a copy

@@ -51,6 +51,9 @@ Public API:
             the chain); slot_power is needed when coherence < 1
       .render(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, doppler, columns)
             spectrogram(combine(...), slot_power(...)): what every caller with slot profiles uses
+      .summed_rows(skeletons, masks, *, times=None) -> ((B, F, L, Ch, bins) complex, slot power | None)
+      .render_rows(skeletons, masks, *, times=None, batch_size=32, n_jobs=1, progress=False) -> (N, doppler, columns)
+            modelling only, window by window, with no slot-profile cache (synthesis without RadarWeightNet)
       .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
       .key() -> dict of everything that determines the output (cache keys)
       .chirp_times (F, L, C) float64 buffer, seconds
@@ -195,10 +198,11 @@ class Simulator(nn.Module):
             scat = e.apply_scatterers(scat, ctx)
         return scat
 
-    def profiles_of(self, scat: Scatterers, times: torch.Tensor) -> torch.Tensor:
-        """Per-slot range profiles (B, 39, F, L, Ch, bins) of reflection points at skeleton ``times``."""
-        return scatterer_profiles(scat, times, self.chirp_times, self.radar, self.chain,
-                                  tx_power_w=self.tx_power_w, gain_tx_dbi=self.gain_tx_dbi, gain_rx_dbi=self.gain_rx_dbi)
+    def profiles_of(self, scat: Scatterers, times: torch.Tensor, summed: bool = False) -> torch.Tensor:
+        """Per-slot range profiles (B, 39, F, L, Ch, bins) of reflection points at skeleton ``times``
+        (``summed``: their sum (B, F, L, Ch, bins), built without the slots)."""
+        return scatterer_profiles(scat, times, self.chirp_times, self.radar, self.chain, tx_power_w=self.tx_power_w,
+                                  gain_tx_dbi=self.gain_tx_dbi, gain_rx_dbi=self.gain_rx_dbi, summed=summed)
 
     def _profiles(self, ctx: SimContext) -> torch.Tensor:
         return self.profiles_of(self.scatterers(ctx), ctx.times)
@@ -310,6 +314,46 @@ class Simulator(nn.Module):
         power = None if self.coherence >= 1.0 else self.slot_power(slot_profiles, weights, times=times,
                                                                      active=active, scale=scale)
         return self.spectrogram(signal, power)
+
+    @torch.no_grad()
+    def summed_rows(self, skeletons: torch.Tensor, masks: torch.Tensor, *,
+                    times: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Modelling only: each window's reflection points simulated and summed, (B, F, L, Ch, bins) complex, and
+        when coherence < 1 the slots' own power (B, doppler, columns), else None. One window at a time, as the
+        slot-profile cache is filled (sim.cache), but nothing is stored, and at coherence 1 no slot is built."""
+        signals, powers = [], []
+        for i in range(skeletons.shape[0]):
+            if self.coherence < 1.0:
+                prof = self.slot_profiles(skeletons[i:i + 1], masks[i:i + 1], times=times)
+                signals.append(self.combine(prof))
+                powers.append(self.slot_power(prof))
+            else:
+                ctx = self.context(skeletons[i:i + 1], masks[i:i + 1], times=times)
+                signals.append(self.profiles_of(self.scatterers(ctx), ctx.times, summed=True))
+        return torch.cat(signals), torch.cat(powers) if powers else None
+
+    @torch.no_grad()
+    def render_rows(self, skeletons: torch.Tensor, masks: torch.Tensor, *, times: torch.Tensor | None = None,
+                    batch_size: int = 32, n_jobs: int = 1, progress: bool = False) -> torch.Tensor:
+        """Modelling-only spectrograms (N, doppler, columns) of N windows, without the slot-profile cache.
+
+        :meth:`summed_rows` of ``batch_size`` windows at a time (in ``n_jobs`` worker processes when > 1), then
+        the signal effects and the chain on each batch in this process: the rows and draws of :meth:`render` on
+        the cache's batches, less its float16 rounding, and no 39 slots a row written (2.5 MB at 4096 chirps)
+        that nothing reads again."""
+        skeletons, masks = torch.as_tensor(skeletons), torch.as_tensor(masks)
+        batches = [slice(i, i + batch_size) for i in range(0, skeletons.shape[0], batch_size)]
+        if min(n_jobs, len(batches)) > 1:  # a worker process costs seconds to start: not for one batch
+            from joblib import Parallel, delayed
+            parts = Parallel(n_jobs=n_jobs, return_as="generator")(
+                delayed(self.summed_rows)(skeletons[b], masks[b], times=times) for b in batches)
+        else:
+            parts = (self.summed_rows(skeletons[b], masks[b], times=times) for b in batches)
+        if progress:
+            from tqdm import tqdm
+            parts = tqdm(parts, total=len(batches), desc=f"spectrograms ({batch_size} rows a step)", unit="step")
+        out = [self.spectrogram(signal, power) for signal, power in parts]
+        return torch.cat(out) if out else torch.zeros(0, self.chain.n_doppler, self.chain.n_columns)
 
     def forward(self, skeleton: torch.Tensor, mask: torch.Tensor, weights: torch.Tensor | None = None, *,
                 times: torch.Tensor | None = None, visibility: torch.Tensor | None = None) -> torch.Tensor:

@@ -50,6 +50,7 @@ from typing import Any, Literal
 
 import h5py
 import numpy as np
+import torch
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.data.datasets import ArrayDataset, file_hash, load_arrays
@@ -259,16 +260,18 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     skel = np.stack([w.positions for w in windows])
     mask = np.stack([w.mask for w in windows])
     times = windows[0].times
-    cache_dir = Path(cache_dir) if cache_dir is not None else Path(out).parent / ".handradar-cache"
-    needs_vis = net is not None or any(e.name == "occlusion" for e in simulator.effects)
-    feats = (cached_bone_features(skel, times, mask, radar.wavelength_m, simulator.hand, cache_dir,
-                                  rcs_exponent=simulator.rcs_exponent, progress=progress, n_jobs=n_jobs)
-             if needs_vis else None)
-    path = cache_slot_profiles(simulator, skel, mask, cache_dir, times=times, progress=progress,
-                               visibility=feats.visible_fraction() if feats is not None and any(
-                                   e.name == "occlusion" for e in simulator.effects) else None)
-    caches = DatasetCaches(feats, mask, times, SlotProfileCache(path))
-    spec = predict_cached(simulator, net, caches, np.arange(len(items))).numpy().astype(np.float32)
+    occlusion = any(e.name == "occlusion" for e in simulator.effects)
+    if net is None and not occlusion:  # modelling only: the slots are summed as simulated, never stored
+        spec = simulator.render_rows(torch.as_tensor(skel), torch.as_tensor(mask), times=torch.as_tensor(times),
+                                     n_jobs=n_jobs, progress=progress).numpy().astype(np.float32)
+    else:
+        cache_dir = Path(cache_dir) if cache_dir is not None else Path(out).parent / ".handradar-cache"
+        feats = cached_bone_features(skel, times, mask, radar.wavelength_m, simulator.hand, cache_dir,
+                                     rcs_exponent=simulator.rcs_exponent, progress=progress, n_jobs=n_jobs)
+        path = cache_slot_profiles(simulator, skel, mask, cache_dir, times=times, progress=progress,
+                                   visibility=feats.visible_fraction() if occlusion else None)
+        caches = DatasetCaches(feats, mask, times, SlotProfileCache(path))
+        spec = predict_cached(simulator, net, caches, np.arange(len(items))).numpy().astype(np.float32)
     classes = source_classes(name, **{k: v for k, v in options.items() if k in ("n_classes", "classes")})
     h = config_hash(name, root, options, simulator.key(), str(weights), "handradar-synth")
     meta_keys = sorted(set().union(*(it.meta.keys() for it in items)))
