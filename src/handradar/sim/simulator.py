@@ -52,7 +52,7 @@ Public API:
       .render(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, doppler, columns)
             spectrogram(combine(...), slot_power(...)): what every caller with slot profiles uses
       .summed_rows(skeletons, masks, *, times=None) -> ((B, F, L, Ch, bins) complex, slot power | None)
-      .render_rows(skeletons, masks, *, times=None, batch_size=32, n_jobs=1, progress=False) -> (N, doppler, columns)
+      .render_rows(skeletons, masks, *, times=None, batch_size=32, progress=False) -> (N, doppler, columns)
             modelling only, window by window, with no slot-profile cache (synthesis without RadarWeightNet)
       .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
       .key() -> dict of everything that determines the output (cache keys)
@@ -334,25 +334,19 @@ class Simulator(nn.Module):
 
     @torch.no_grad()
     def render_rows(self, skeletons: torch.Tensor, masks: torch.Tensor, *, times: torch.Tensor | None = None,
-                    batch_size: int = 32, n_jobs: int = 1, progress: bool = False) -> torch.Tensor:
+                    batch_size: int = 32, progress: bool = False) -> torch.Tensor:
         """Modelling-only spectrograms (N, doppler, columns) of N windows, without the slot-profile cache.
 
-        :meth:`summed_rows` of ``batch_size`` windows at a time (in ``n_jobs`` worker processes when > 1), then
-        the signal effects and the chain on each batch in this process: the rows and draws of :meth:`render` on
-        the cache's batches, less its float16 rounding, and no 39 slots a row written (2.5 MB at 4096 chirps)
-        that nothing reads again."""
+        :meth:`summed_rows` of ``batch_size`` windows at a time, then the signal effects and the chain on each
+        batch: the rows and draws of :meth:`render` on the cache's batches, less its float16 rounding, and no
+        39 slots a row written (2.5 MB at 4096 chirps) that nothing reads again. (Worker processes were slower
+        than torch's own threads on 2 cores: docs/architecture.md.)"""
         skeletons, masks = torch.as_tensor(skeletons), torch.as_tensor(masks)
         batches = [slice(i, i + batch_size) for i in range(0, skeletons.shape[0], batch_size)]
-        if min(n_jobs, len(batches)) > 1:  # a worker process costs seconds to start: not for one batch
-            from joblib import Parallel, delayed
-            parts = Parallel(n_jobs=n_jobs, return_as="generator")(
-                delayed(self.summed_rows)(skeletons[b], masks[b], times=times) for b in batches)
-        else:
-            parts = (self.summed_rows(skeletons[b], masks[b], times=times) for b in batches)
         if progress:
             from tqdm import tqdm
-            parts = tqdm(parts, total=len(batches), desc=f"spectrograms ({batch_size} rows a step)", unit="step")
-        out = [self.spectrogram(signal, power) for signal, power in parts]
+            batches = tqdm(batches, desc=f"spectrograms ({batch_size} rows a step)", unit="step")
+        out = [self.spectrogram(*self.summed_rows(skeletons[b], masks[b], times=times)) for b in batches]
         return torch.cat(out) if out else torch.zeros(0, self.chain.n_doppler, self.chain.n_columns)
 
     def forward(self, skeleton: torch.Tensor, mask: torch.Tensor, weights: torch.Tensor | None = None, *,

@@ -263,7 +263,7 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     occlusion = any(e.name == "occlusion" for e in simulator.effects)
     if net is None and not occlusion:  # modelling only: the slots are summed as simulated, never stored
         spec = simulator.render_rows(torch.as_tensor(skel), torch.as_tensor(mask), times=torch.as_tensor(times),
-                                     n_jobs=n_jobs, progress=progress).numpy().astype(np.float32)
+                                     progress=progress).numpy().astype(np.float32)
     else:
         cache_dir = Path(cache_dir) if cache_dir is not None else Path(out).parent / ".handradar-cache"
         feats = cached_bone_features(skel, times, mask, radar.wavelength_m, simulator.hand, cache_dir,
