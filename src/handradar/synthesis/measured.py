@@ -121,7 +121,8 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     chain = replace(dataset_chain(m, shape, radar.n_loops), dynamic_range_db=DEEP_FLOOR_DB)
     source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
               "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
-    out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, chain, dict(sim or {}), 'measured/1')}.h5"
+    # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
+    out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, chain, dict(sim or {}), 'measured/2')}.h5"
     if not out.is_file():
         log.info("synthesising %d rows per class of %d classes (v_max %.2f m/s, %.1f ms per column, %d chirps a frame)",
                  per_class, len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3, radar.n_loops)

@@ -290,7 +290,8 @@ def synthesize_external(source_cfg: Any, *, seed: int, cache_dir: str | Path, ra
     """``synth.external_provider`` (contract in handradar.synthesis.providers): a cached handradar-synth run."""
     name, root, options = source_options(source_cfg)
     simulator = simulator_for(sim, radar, chain)
-    key = config_hash(name, str(Path(root).resolve()), options, simulator.key(), str(weights), "external")
+    # external/2: without weights rendered by Simulator.render_rows (no float16 slot-profile cache in between)
+    key = config_hash(name, str(Path(root).resolve()), options, simulator.key(), str(weights), "external/2")
     out = Path(cache_dir) / f"external-{name}-{key}.h5"
     if not out.is_file():
         synthesize_source(source_cfg, out, radar=radar, chain=chain, sim=simulator, weights=weights,
