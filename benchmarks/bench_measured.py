@@ -3,8 +3,8 @@
 The classes and grid of Xia et al.'s manifest (conf/manifests/xia2021.yaml: 8 classes, 64 Doppler bins x 64
 frames, frame-based Doppler), ``HANDRADAR_BENCH_MEASURED_PER_CLASS`` rows per class (default 125: 1000 rows),
 motions drawn as the measured job draws them, the paper's model with no RadarWeightNet, cold: skeleton generation,
-the reflection points' signals summed window by window (nothing cached), and the chain. Unknowns at the values the measured runs use (docs/findings.md): v_max 1.5 m/s, 50 ms a
-column, 64 chirps a frame (4096 chirps a row).
+the reflection points' signals summed window by window (nothing cached), and the chain. Unknowns at the values the
+measured runs use (docs/findings.md): v_max 1.5 m/s, 50 ms a column, 64 chirps a frame (4096 chirps a row).
 Needs no measured data. Target (issue 54): >= 50 rows/s on 2 cores.
 """
 

@@ -156,7 +156,7 @@ def test_simulator_uses_the_shared_chain_and_is_batch_consistent(radar, short_ch
     assert float(prof[0, 19:38].abs().max()) == 0.0 and float(prof[1, 19:38].abs().max()) > 0
 
 
-def test_render_rows_is_render_of_the_slot_profiles_in_one_process_or_two(radar, short_chain):
+def test_render_rows_is_render_of_the_slot_profiles(radar, short_chain):
     """Synthesis without RadarWeightNet renders window by window, caching nothing (at coherence 1 building no slot):
     the spectrograms and noise draws of render on the batch's slot profiles (coherence < 1: the slots' own power
     too)."""

@@ -72,6 +72,7 @@ spectrogram is normalised to its peak).
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -333,9 +334,11 @@ class Simulator(nn.Module):
         return torch.cat(signals), torch.cat(powers) if powers else None
 
     @torch.no_grad()
-    def render_rows(self, skeletons: torch.Tensor, masks: torch.Tensor, *, times: torch.Tensor | None = None,
-                    batch_size: int = 32, progress: bool = False) -> torch.Tensor:
-        """Modelling-only spectrograms (N, doppler, columns) of N windows, without the slot-profile cache.
+    def render_rows(self, skeletons: torch.Tensor | np.ndarray, masks: torch.Tensor | np.ndarray, *,
+                    times: torch.Tensor | np.ndarray | None = None, batch_size: int = 32,
+                    progress: bool = False) -> torch.Tensor:
+        """Modelling-only spectrograms (N, doppler, columns) of N windows, without the slot-profile cache
+        (skeletons (N, T, 2, 21, 3) metres, masks (N, T, 2), times (T,) seconds: tensors or arrays).
 
         :meth:`summed_rows` of ``batch_size`` windows at a time, then the signal effects and the chain on each
         batch: the rows and draws of :meth:`render` on the cache's batches, less its float16 rounding, and no

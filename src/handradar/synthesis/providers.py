@@ -50,7 +50,6 @@ from typing import Any, Literal
 
 import h5py
 import numpy as np
-import torch
 from omegaconf import DictConfig, OmegaConf
 
 from handradar.data.datasets import ArrayDataset, file_hash, load_arrays
@@ -262,8 +261,7 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     times = windows[0].times
     occlusion = any(e.name == "occlusion" for e in simulator.effects)
     if net is None and not occlusion:  # modelling only: the slots are summed as simulated, never stored
-        spec = simulator.render_rows(torch.as_tensor(skel), torch.as_tensor(mask), times=torch.as_tensor(times),
-                                     progress=progress).numpy().astype(np.float32)
+        spec = simulator.render_rows(skel, mask, times=times, progress=progress).numpy().astype(np.float32)
     else:
         cache_dir = Path(cache_dir) if cache_dir is not None else Path(out).parent / ".handradar-cache"
         feats = cached_bone_features(skel, times, mask, radar.wavelength_m, simulator.hand, cache_dir,
