@@ -70,6 +70,12 @@ def test_orientation_from_first_principles(tmp_path):
     assert np.unravel_index(np.argmax(d.x[0]), d.x[0].shape) == (8, 10)
 
 
+def test_frame_clutter_removal_reaches_the_chain(tmp_path):
+    """radar.clutter_removal: frame (each frame's own mean, handradar.radar.chain) is the dataset chain's setting."""
+    path = MeasuredDataset(_edit(stand_in(tmp_path), radar__clutter_removal="frame"), tmp_path / "cache").path()
+    assert read_attrs(path)["chain"].clutter_removal == "frame"
+
+
 def test_grid_resampled(tmp_path):
     d = load_arrays(MeasuredDataset(stand_in(tmp_path, grid=[64, 16]), tmp_path / "c").path())
     assert d.x.shape == (15, 64, 16) and 0 <= d.x.min() and d.x.max() <= 1
@@ -95,6 +101,7 @@ def _edit(path: Path, **changes) -> Path:
     ({"axes__approaching": "up"}, "'axes.approaching' must be high, low or unknown"),
     ({"format": "x/1"}, "'format' must be 'handradar.measured/1'"),
     ({"radar__v_max_m_s": -1}, "'radar.v_max_m_s' must be a positive number or unknown"),
+    ({"radar__clutter_removal": "sometimes"}, "'radar.clutter_removal' must be true, false or frame"),
 ])
 def test_bad_manifest_is_one_line(tmp_path, change, expected):
     path = _edit(stand_in(tmp_path), **change)

@@ -79,6 +79,27 @@ def test_circles_turn_opposite_ways():
     assert np.all(ccw >= 0) and np.mean(ccw > 0) > 0.95 and np.all(cw <= 0) and np.mean(cw < 0) > 0.95
 
 
+def test_tremor_rides_on_any_motion():
+    """tremor_mm: the motion plus, on each axis, a sinusoid of that amplitude (mm) at 8-12 Hz."""
+    still = centre("push")
+    shaky = centre("push", tremor_mm=0.5)
+    d = (shaky - still).astype(np.float64)
+    assert np.abs(d).max() == pytest.approx(0.5e-3, rel=0.02)
+    spectrum = np.abs(np.fft.rfft(d, axis=0))
+    peak_hz = np.fft.rfftfreq(len(d), 1 / 100.0)[spectrum.argmax(axis=0)]
+    assert np.all((peak_hz >= 7.7) & (peak_hz <= 12.3))  # 8-12 Hz within the 0.31 Hz resolution of 3.2 s
+
+
+def test_a_single_value_range_draws_nothing():
+    """A field added to the draws later (tremor_mm) leaves every existing draw as it was while its range is one value."""
+    one = MotionDraw.draw(np.random.default_rng(3))
+    two = MotionDraw.draw(np.random.default_rng(3), {"tremor_mm": (0.5, 0.5)})
+    assert one.tremor_mm == 0.0 and two.tremor_mm == 0.5
+    assert {k: v for k, v in vars(one).items() if k != "tremor_mm"} == {k: v for k, v in vars(two).items() if k != "tremor_mm"}
+    three = MotionDraw.draw(np.random.default_rng(3), {"tremor_mm": (0.2, 1.0)})
+    assert 0.2 <= three.tremor_mm <= 1.0
+
+
 def test_idle_is_still_and_random_moves_a_little():
     idle = centre("idle")
     assert np.ptp(idle, axis=0).max() < 0.003

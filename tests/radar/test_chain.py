@@ -14,6 +14,7 @@ from handradar.radar.chain import (
     column_times_s,
     gate_bins,
     measured_spectrogram,
+    profile_power,
     range_profiles_from_adc,
     range_response,
     spectrogram_from_profiles,
@@ -190,6 +191,35 @@ def test_static_clutter_is_removed(radar, chain):
     moving = point_target_adc(radar, 16, 0.50, -0.3, amplitude=200.0)
     spec, _ = measured_spectrogram(static + moving, radar, chain)
     assert (spec.argmax(0) == expected_doppler_row(radar, chain, -0.3)).all()
+
+
+def test_frame_clutter_removal_takes_each_frames_own_mean():
+    """clutter_removal "frame" (the TI mmWave SDK's static clutter removal): a reflector still within each frame but
+    stepped between frames (a hand that moved, then held) leaves nothing, where the window's mean leaves it; a tone
+    at a whole Doppler bin (zero mean over the frame's loops) is untouched; a slow drift (0.3 bin) keeps its power
+    beside zero Doppler and loses it at zero, which stays the peak without clutter removal."""
+    loops, frames = 32, 4
+    chain = ChainConfig(stft_len=loops, stft_hop=loops, n_columns=frames, clutter_removal="frame")
+    kept, window_mean = (dataclasses.replace(chain, clutter_removal=c) for c in (False, True))
+    rng = np.random.default_rng(0)
+    steps = rng.normal(size=(frames, 1, 1, 1)) + 1j * rng.normal(size=(frames, 1, 1, 1))
+    held = torch.as_tensor(np.broadcast_to(steps, (frames, loops, 1, 1)).copy())
+    assert float(profile_power(held, chain).max()) < 1e-20 < 1e-3 < float(profile_power(held, window_mean).max())
+    n = np.arange(frames * loops).reshape(frames, loops, 1, 1)
+    tone = torch.as_tensor(np.exp(2j * np.pi * 3 * n / loops))
+    np.testing.assert_allclose(profile_power(tone, chain).numpy(), profile_power(tone, kept).numpy(), rtol=1e-9,
+                               atol=1e-9 * float(profile_power(tone, kept).max()))
+    drift = np.exp(2j * np.pi * 0.3 * n / loops)
+    removed, whole = (profile_power(torch.as_tensor(drift), c)[:, 0].numpy() for c in (chain, kept))
+    x = drift[0, :, 0, 0] - drift[0, :, 0, 0].mean()  # the first frame, by a direct sum of its windowed DTFT
+    w = 0.54 - 0.46 * np.cos(2 * np.pi * np.arange(loops) / loops)
+    k = np.arange(loops) - loops // 2
+    np.testing.assert_allclose(removed, np.abs((w * x * np.exp(2j * np.pi * np.outer(k, np.arange(loops)) / loops))
+                                               .sum(axis=1)) ** 2, rtol=1e-9)
+    zero = loops // 2
+    assert whole.argmax() == zero and removed[zero] < 0.1 * removed.max()  # zero notched, its neighbour kept
+    with pytest.raises(ValueError, match="clutter_removal"):
+        ChainConfig(clutter_removal="sometimes")
 
 
 def test_spectrogram_range_and_floor(radar, chain):

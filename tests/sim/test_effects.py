@@ -322,9 +322,10 @@ def test_noise_draws_average_to_the_expected_floor(radar, short_chain):
         REGISTRY["noise"](draws=-1)
 
 
-@pytest.mark.parametrize("clutter", [True, False])
+@pytest.mark.parametrize("clutter", [True, False, "frame"])
 def test_white_noise_power_is_the_monte_carlo_mean(radar, short_chain, clutter):
-    """The closed form E[profile_power(noise)] = var n_ch n_bins (sum w^2 - |W(d)|^2 / N) against
+    """The closed form E[profile_power(noise)] = var n_ch n_bins (sum w^2 - |W(d)|^2 / N), N the chirps each clutter
+    mean is over (the window's frames x loops, or a frame's loops), against
     the mean of 400 draws of the simulator's own noise (ADC samples through the range FFT): within
     5 sigma of the sampling error per row, and the notch at zero Doppler only with clutter removal."""
     from dataclasses import replace
@@ -345,7 +346,8 @@ def test_white_noise_power_is_the_monte_carlo_mean(radar, short_chain, clutter):
     power = profile_power(prof, chain)  # (400, doppler, columns)
     w2 = float((window(chain.range_window, radar.n_samples, dtype=torch.float64) ** 2).sum())
     _, frames, loops, ch, bins = prof.shape
-    closed = white_noise_power(torch.tensor(w2, dtype=torch.float64), chain, frames * loops, ch, bins)
+    n_mean = loops if clutter == "frame" else frames * loops
+    closed = white_noise_power(torch.tensor(w2, dtype=torch.float64), chain, n_mean, ch, bins)
     rows = power.mean(dim=(0, 2))  # (doppler,)
     se = power.mean(dim=2).std(dim=0) / 400**0.5
     assert ((rows - closed).abs() < 5 * se).all()

@@ -38,7 +38,7 @@ from handradar.data.skeletons import motion_classes
 from handradar.errors import FormatError
 from handradar.hand.motions import DEFAULT_RANGES
 from handradar.provenance import config_hash
-from handradar.radar.chain import ChainConfig
+from handradar.radar.chain import CLUTTER_REMOVALS, ChainConfig
 from handradar.radar.config import RadarConfig
 
 log = logging.getLogger(__name__)
@@ -68,7 +68,7 @@ class Manifest:
     grid: tuple[int, int] | None                  # None: keep the images' own grid
     values: tuple[float, float] | None            # value range mapped to [0, 1]; None: each image's min..max
     radar: dict[str, float | str]                 # RADAR_FIELDS, numbers or "unknown"
-    clutter_removal: bool                         # the dataset's chain subtracted the static clutter
+    clutter_removal: bool | str                   # the dataset's chain subtracted the static clutter (or "frame")
     motion_ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
     citation: str = ""
     test_fraction: float | None = None            # the split rule when the layout has no {split}
@@ -195,6 +195,9 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
     extra = sorted(set(radar_raw) - set(RADAR_FIELDS) - {"clutter_removal", "name"})
     if extra:
         raise FormatError(path, f"unknown radar field 'radar.{extra[0]}'; expected {list(RADAR_FIELDS)}, clutter_removal")
+    clutter = radar_raw.get("clutter_removal", True)
+    if clutter not in CLUTTER_REMOVALS or isinstance(clutter, (int, float)) and not isinstance(clutter, bool):
+        raise FormatError(path, f"'radar.clutter_removal' must be true, false or frame, found {clutter!r}")
     ranges = {}
     for k, v in (d.get("motion_ranges") or {}).items():
         if k not in DEFAULT_RANGES or not (isinstance(v, list) and len(v) == 2 and v[0] <= v[1]):
@@ -206,7 +209,7 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
                     zero_doppler=None if zero is None else float(zero),
                     grid=None if grid == "keep" else (int(grid[0]), int(grid[1])),
                     values=None if values == "per_image" else (float(values[0]), float(values[1])),
-                    radar=radar, clutter_removal=bool(radar_raw.get("clutter_removal", True)), motion_ranges=ranges,
+                    radar=radar, clutter_removal=clutter, motion_ranges=ranges,
                     citation=str(d.get("citation", "")), test_fraction=test_fraction,
                     split_seed=int(rows.get("seed", 0)))
 

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from handradar.hand.skeleton import BONE_NAMES, N_BONES
-from handradar.radar.chain import ChainConfig, remove_static_clutter, stft_power
+from handradar.radar.chain import ChainConfig, profile_power
 from handradar.sim.scatterers import N_SLOTS
 
 
@@ -60,8 +60,7 @@ def signature_correlation(residual: np.ndarray, explained: np.ndarray) -> float:
 def slot_power(slot_profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     """Per-slot STFT power (B, slots, doppler, columns) of slot profiles (B, slots, F, L, Ch, bins),
     through the chain's clutter removal and STFT (the steps before the dB scale)."""
-    p = remove_static_clutter(slot_profiles) if chain.clutter_removal else slot_profiles
-    return stft_power(p, chain)
+    return profile_power(slot_profiles, chain)
 
 
 class BoneResiduals:

@@ -11,7 +11,8 @@ procedural program on the open standard hand (:func:`handradar.hand.retarget.sta
 - ``pinch``: thumb and index tips close and open again;
 - ``circle_cw`` / ``circle_ccw``: the hand circles 1.5 turns in the plane holding the line of sight
   and x, clockwise or counter-clockwise with x to the right and the line of sight up;
-- ``idle``: the hand holds still with a physiological tremor (about 1 mm, 8-12 Hz);
+- ``idle``: the hand holds still with a physiological tremor (about 1 mm, 8-12 Hz); any other motion
+  may carry one too (``tremor_mm``);
 - ``random``: a smooth random wander of a few centimetres (non-gesture hand movement).
 
 Radar frame (docs/architecture.md, "Coordinates and units"): z is boresight (up from the board),
@@ -43,6 +44,7 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "azimuth_deg": (-20.0, 20.0),  # hand direction off boresight, in the x-z plane
     "amplitude": (0.7, 1.3),       # multiplies the motion's size: 1 = a 20 cm swipe, a 5 cm circle radius
     "onset": (0.3, 0.7),           # where the motion's middle lies in the sequence (share of its duration)
+    "tremor_mm": (0.0, 0.0),       # physiological tremor (8-12 Hz) added to every motion but idle, which has its own
 }
 SWIPE_M = 0.20          # swipe and push/pull length at amplitude 1
 SWIPE_S = 0.5           # swipe duration at speed 1
@@ -66,15 +68,18 @@ class MotionDraw:
     azimuth_deg: float = 0.0
     amplitude: float = 1.0
     onset: float = 0.5
+    tremor_mm: float = 0.0
 
     @classmethod
     def draw(cls, rng: np.random.Generator, ranges: Mapping[str, tuple[float, float]] | None = None) -> MotionDraw:
-        """Each field uniform in its range (``ranges`` overrides DEFAULT_RANGES by name)."""
+        """Each field uniform in its range (``ranges`` overrides DEFAULT_RANGES by name). A single-value range
+        draws nothing, so a field added later (``tremor_mm``) leaves every existing draw as it was."""
         r = {**DEFAULT_RANGES, **(ranges or {})}
         unknown = sorted(set(r) - set(DEFAULT_RANGES))
         if unknown:
             raise ValueError(f"unknown motion parameter {unknown[0]!r}; expected one of {sorted(DEFAULT_RANGES)}")
-        return cls(**{k: float(rng.uniform(*map(float, r[k]))) for k in DEFAULT_RANGES})
+        lows_highs = {k: tuple(map(float, r[k])) for k in DEFAULT_RANGES}
+        return cls(**{k: lo if lo == hi else float(rng.uniform(lo, hi)) for k, (lo, hi) in lows_highs.items()})
 
 
 def min_jerk(tau: np.ndarray) -> np.ndarray:
@@ -116,6 +121,12 @@ def _pinch(joints: np.ndarray, closure: np.ndarray) -> np.ndarray:
     for k, share in zip(THUMB[1:], (0.3, 0.6, 0.9)):
         out[:, k] = out[:, k] + (share * closure)[:, None] * (target - out[:, k])
     return out
+
+
+def tremor(t: np.ndarray, amplitude_m: float, rng: np.random.Generator) -> np.ndarray:
+    """Physiological tremor (len(t), 3): on each axis a sinusoid of ``amplitude_m`` at 8-12 Hz, random phase."""
+    f = rng.uniform(8.0, 12.0, 3)
+    return amplitude_m * np.sin(2 * np.pi * f * t[:, None] + rng.uniform(0, 2 * np.pi, 3))
 
 
 def hand_pose(draw: MotionDraw, hand: str = "right") -> tuple[np.ndarray, np.ndarray]:
@@ -167,13 +178,14 @@ def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rat
         lateral = np.cross([0.0, 1.0, 0.0], sight)  # x turned with the line of sight
         offset = radius * (np.cos(phase)[:, None] - 1) * lateral + radius * np.sin(phase)[:, None] * sight
     elif name == "idle":
-        f = rng.uniform(8.0, 12.0, 3)
-        offset = TREMOR_M * draw.amplitude * np.sin(2 * np.pi * f * t[:, None] + rng.uniform(0, 2 * np.pi, 3))
+        offset = tremor(t, TREMOR_M * draw.amplitude, rng)
     else:  # random: low-pass noise (a few knots, cubic) of WANDER_M
         knots = np.linspace(0, duration_s, 6)
         values = rng.normal(0.0, WANDER_M * draw.amplitude / 2, (len(knots), 3))
         offset = np.stack([np.interp(t, knots, values[:, k]) for k in range(3)], axis=1)
         offset = np.apply_along_axis(lambda v: np.convolve(v, np.ones(25) / 25, mode="same"), 0, offset)
+    if draw.tremor_mm > 0 and name != "idle":
+        offset = offset + tremor(t, draw.tremor_mm * 1e-3, rng)
     positions = np.zeros((len(t), 2, N_JOINTS, 3), dtype=np.float32)
     positions[:, 0] = joints + centre + offset[:, None, :]
     mask = np.zeros((len(t), 2), dtype=bool)

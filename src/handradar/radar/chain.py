@@ -44,6 +44,9 @@ COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
 }
 
 
+CLUTTER_REMOVALS = (True, False, "frame")  # ChainConfig.clutter_removal
+
+
 @dataclass(frozen=True)
 class ChainConfig:
     """Settings of the processing chain (the same for measured and simulated data).
@@ -55,6 +58,10 @@ class ChainConfig:
     the spectrogram has this many rows (:attr:`n_doppler`).
     n_columns: spectrogram width; it must be a whole number of frames' worth of columns.
     dynamic_range_db: values more than this below the spectrogram's peak are clamped to 0.
+    clutter_removal: True subtracts each range bin's slow-time mean over the window (all its frames and
+    loops); ``"frame"`` over each frame's loops alone, as the TI mmWave SDK's static clutter removal does
+    (a still reflector goes even if it moved between frames; a slowly moving one leaves the rows beside
+    zero Doppler, with zero itself notched); False: none.
     """
 
     range_window: str = "hann"
@@ -65,9 +72,11 @@ class ChainConfig:
     doppler_bins: int | None = field(default=None, metadata={"hash_if_set": True})  # unset: earlier cache keys hold
     n_columns: int = 32
     dynamic_range_db: float = 30.0
-    clutter_removal: bool = True
+    clutter_removal: bool | str = True
 
     def __post_init__(self) -> None:
+        if self.clutter_removal not in CLUTTER_REMOVALS:
+            raise ValueError(f"clutter_removal must be true, false or 'frame', found {self.clutter_removal!r}")
         object.__setattr__(self, "gate_m", (float(self.gate_m[0]), float(self.gate_m[1])))
         for name in (self.range_window, self.stft_window):
             if name not in COSINE_WINDOWS:
@@ -247,9 +256,17 @@ def _range_response_terms(beat_cycles: torch.Tensor, bins: torch.Tensor, n: int,
 
 
 # ---- shared steps --------------------------------------------------------------------------------
-def remove_static_clutter(profiles: torch.Tensor) -> torch.Tensor:
-    """Subtract the slow-time mean of each range bin and channel over all frames and loops."""
-    return profiles - profiles.mean(dim=(-4, -3), keepdim=True)
+def remove_static_clutter(profiles: torch.Tensor, per_frame: bool = False) -> torch.Tensor:
+    """Subtract the slow-time mean of each range bin and channel over all frames and loops (``per_frame``:
+    over each frame's loops)."""
+    return profiles - profiles.mean(dim=(-3,) if per_frame else (-4, -3), keepdim=True)
+
+
+def clutter_removed(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
+    """``profiles`` (..., frames, loops, channels, bins) after the chain's clutter removal (ChainConfig.clutter_removal)."""
+    if not chain.clutter_removal:
+        return profiles
+    return remove_static_clutter(profiles, per_frame=chain.clutter_removal == "frame")
 
 
 def stft_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
@@ -304,9 +321,7 @@ def power_to_unit(power: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
 
 def profile_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     """Per-range-bin slow-time signal -> clutter removal (if set) -> STFT power (..., doppler, columns)."""
-    if chain.clutter_removal:
-        profiles = remove_static_clutter(profiles)
-    return stft_power(profiles, chain)
+    return stft_power(clutter_removed(profiles, chain), chain)
 
 
 def white_noise_power(variance: torch.Tensor, chain: ChainConfig, n_chirps: int, n_channels: int,
@@ -315,8 +330,8 @@ def white_noise_power(variance: torch.Tensor, chain: ChainConfig, n_chirps: int,
 
     ``variance`` (any shape ...): E|n|^2 of each per-range-bin value, independent across chirps
     and channels (receiver noise after the range FFT: correlation across bins does not change the
-    summed power). Clutter removal subtracts the mean of ``n_chirps`` values (frames x loops),
-    leaving covariance variance (delta - 1 / n_chirps); a windowed DFT bin d then holds
+    summed power). Clutter removal subtracts the mean of ``n_chirps`` values (frames x loops; loops
+    for ``"frame"``), leaving covariance variance (delta - 1 / n_chirps); a windowed DFT bin d then holds
     variance (sum w^2 - |W(d)|^2 / n_chirps), W the window's DFT: the mean removal notches the
     rows near zero Doppler only. Summed over ``n_channels`` channels and ``n_bins`` bins."""
     w = window(chain.stft_window, chain.stft_len, dtype=torch.float64)
@@ -356,7 +371,7 @@ def capture_spectrogram(profiles: torch.Tensor, radar: RadarConfig, chain: Chain
     if profiles.shape[-4] < fpw:
         raise ValueError(f"capture has {profiles.shape[-4]} frames, fewer than the {fpw} of one spectrogram")
     if start is None:
-        full = stft_power(remove_static_clutter(profiles) if chain.clutter_removal else profiles, chain)
+        full = profile_power(profiles, chain)
         start = select_window_start(full, chain, chain.columns_per_frame(radar))
     elif not 0 <= start <= profiles.shape[-4] - fpw:
         raise ValueError(f"window start frame {start} outside the capture's 0..{profiles.shape[-4] - fpw}")

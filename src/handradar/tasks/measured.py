@@ -14,7 +14,8 @@ and ``synth.measured`` for its unknowns. Variants (``MEASURED_VARIANTS``):
 - ``radar_only``: the K real rows;
 - ``model_synth``: the K real rows + the synthetic rows (``synth.measured.real_share``: the real rows' share of
   every batch; null: their share of the rows);
-- ``model_synth_only``: the synthetic rows alone (K = 0 is this variant alone);
+- ``model_synth_only``: the synthetic rows alone (K = 0 is this variant alone); with ``synth.measured.adapt_bn``
+  its BatchNorm statistics are then recomputed on the measured rows the fit sees, unlabelled (AdaBN);
 - ``synth_pretrain``: trained on the synthetic rows, then fine-tuned on the K real rows.
 
 Metrics: ``val/acc_<variant>`` and ``test/acc_<variant>_<split>`` for each test split. The run folder also holds
@@ -50,7 +51,7 @@ from handradar.synthesis.measured import (
     measured_manifest,
     synthesize_measured,
 )
-from handradar.tasks.classify import evaluate
+from handradar.tasks.classify import evaluate, recompute_bn_stats
 
 if TYPE_CHECKING:
     from handradar.tasks.train import Job
@@ -183,6 +184,10 @@ def run_measured(job: Job) -> dict[str, float]:
                 net = job.fit_classifier(name, real_part, n_classes, init=backbone_state(synthetic_only().cpu()))
             elif name == "model_synth_only":
                 net = synthetic_only()
+                if cfg.synth.measured.get("adapt_bn") and len(fit_rows):
+                    # AdaBN (Li et al. 2018): BatchNorm statistics of the unlabelled measured rows the fit sees
+                    recompute_bn_stats(net, real.x[fit_rows], device=job._eval_device())
+                    log.info("%s: BatchNorm statistics of %d unlabelled measured rows", name, len(fit_rows))
             elif name == "model_synth" and real_share is not None and real_part:
                 net = job.fit_classifier(name, real_part + synth_part, n_classes, shares=[real_share, 1.0 - real_share])
             else:

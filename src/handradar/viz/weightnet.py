@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from handradar.hand.skeleton import BONE_NAMES, HANDS
-from handradar.radar.chain import remove_static_clutter, stft_power
+from handradar.radar.chain import profile_power
 from handradar.viz.common import pyplot, save_figure, spectrogram_panel
 
 SLOT_NAMES = tuple(f"{h[0].upper()} {b}" for h in HANDS for b in BONE_NAMES)
@@ -52,9 +52,9 @@ def plot_decomposition(sim, pairs, weights: np.ndarray, path: str | Path, *, tit
     fig, axes = plt.subplots(1, len(order) + 1, figsize=(1.25 * (len(order) + 1), 2.2), squeeze=False)
     spectrogram_panel(axes[0, 0], full, "all points")
 
-    total = stft_power(remove_static_clutter(full_sig), sim.chain)[0].amax().item()
+    total = profile_power(full_sig, sim.chain)[0].amax().item()
     for ax, k in zip(axes[0, 1:], order):
-        p = stft_power(remove_static_clutter(singles[k]), sim.chain)[0].numpy()
+        p = profile_power(singles[k], sim.chain)[0].numpy()
         db = 10 * np.log10(p / total + 1e-30)
         spectrogram_panel(ax, np.clip((db + sim.chain.dynamic_range_db) / sim.chain.dynamic_range_db, 0, 1),
                           f"{SLOT_NAMES[k]}\n{100 * energies[k] / max(total_energy, 1e-30):.0f}%")
