@@ -156,6 +156,12 @@ def test_xia2021_manifest(tmp_path):
     # the zero-Doppler band (row 31 of the images) lands on the centre row in every class mean
     means = np.stack([d.x[d.y == c].mean(axis=(0, 2)) for c in range(8)])
     assert np.all(np.abs(np.argmax(means, axis=1) - 32) <= 1)
+    # clutter_removal: frame: zero Doppler itself is notched, the rows beside it kept, on the median training row of
+    # every class but finger circle (whose motion crosses zero all along)
+    train = d.meta["split"] == "train"
+    band = np.stack([np.median(d.x[train & (d.y == c), 31:34].mean(axis=2), axis=0) for c in range(8)])
+    notched = (band[:, 1] < band[:, 0]) & (band[:, 1] < band[:, 2])
+    assert notched.tolist() == [c != d.classes.index("finger circle") for c in range(8)]
 
 
 def test_synthesis_radar_and_chain_hold_the_dataset_grid(tmp_path):

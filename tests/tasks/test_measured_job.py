@@ -61,3 +61,20 @@ def test_real_share_of_the_batches(tmp_path):
     cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", *extra, "synth.measured.real_share=1.5"))
     with pytest.raises(ValueError, match=r"real_share must lie in \(0, 1\)"):
         run(cfg, tmp_path / "run2")
+
+
+def test_synthetic_only_adapts_batchnorm_to_the_fit_rows(tmp_path, monkeypatch):
+    """synth.measured.adapt_bn (AdaBN): the synthetic-only classifier's BatchNorm statistics are recomputed on the
+    unlabelled measured rows the fit sees (the training users' rows outside validation), and only when set."""
+    import handradar.tasks.measured as measured_job
+
+    seen, recompute = [], measured_job.recompute_bn_stats
+    monkeypatch.setattr(measured_job, "recompute_bn_stats",
+                        lambda net, x, **kw: (seen.append(len(x)), recompute(net, x, **kw))[1])
+    measured_stand_in(tmp_path / "data")
+    for adapt in ("true", "false"):
+        cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", "split.per_class=0",
+                                      f"synth.measured.adapt_bn={adapt}"))
+        run(cfg, tmp_path / f"run-{adapt}")
+    fit = json.loads(next((tmp_path / "cache" / "synth").glob("measured-fit-*.json")).read_text())
+    assert seen == [fit["n_rows"]]
