@@ -102,6 +102,7 @@ def _edit(path: Path, **changes) -> Path:
     ({"format": "x/1"}, "'format' must be 'handradar.measured/1'"),
     ({"radar__v_max_m_s": -1}, "'radar.v_max_m_s' must be a positive number or unknown"),
     ({"radar__clutter_removal": "sometimes"}, "'radar.clutter_removal' must be true, false or frame"),
+    ({"radar__clutter_removal": 1}, "'radar.clutter_removal' must be true, false or frame"),
 ])
 def test_bad_manifest_is_one_line(tmp_path, change, expected):
     path = _edit(stand_in(tmp_path), **change)

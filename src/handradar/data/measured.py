@@ -196,7 +196,7 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
     if extra:
         raise FormatError(path, f"unknown radar field 'radar.{extra[0]}'; expected {list(RADAR_FIELDS)}, clutter_removal")
     clutter = radar_raw.get("clutter_removal", True)
-    if clutter not in CLUTTER_REMOVALS or isinstance(clutter, (int, float)) and not isinstance(clutter, bool):
+    if not (isinstance(clutter, bool) or clutter in CLUTTER_REMOVALS and isinstance(clutter, str)):
         raise FormatError(path, f"'radar.clutter_removal' must be true, false or frame, found {clutter!r}")
     ranges = {}
     for k, v in (d.get("motion_ranges") or {}).items():
