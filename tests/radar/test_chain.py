@@ -196,8 +196,8 @@ def test_static_clutter_is_removed(radar, chain):
 def test_frame_clutter_removal_takes_each_frames_own_mean():
     """clutter_removal "frame" (the TI mmWave SDK's static clutter removal): a reflector still within each frame but
     stepped between frames (a hand that moved, then held) leaves nothing, where the window's mean leaves it; a tone
-    at a whole Doppler bin (zero mean over the frame's loops) is untouched; a slow drift (0.3 bin) keeps its power
-    beside zero Doppler and loses it at zero, which stays the peak without clutter removal."""
+    at a whole Doppler bin (zero mean over the frame's loops) is untouched; a slow drift (0.3 bin) is the windowed
+    DTFT of each frame less its mean (a direct sum), notched at zero Doppler, its peak without clutter removal."""
     loops, frames = 32, 4
     chain = ChainConfig(stft_len=loops, stft_hop=loops, n_columns=frames, clutter_removal="frame")
     kept, window_mean = (dataclasses.replace(chain, clutter_removal=c) for c in (False, True))

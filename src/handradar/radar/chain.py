@@ -263,7 +263,8 @@ def remove_static_clutter(profiles: torch.Tensor, per_frame: bool = False) -> to
 
 
 def clutter_removed(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
-    """``profiles`` (..., frames, loops, channels, bins) after the chain's clutter removal (ChainConfig.clutter_removal)."""
+    """``profiles`` (..., frames, loops, channels, bins) after the chain's clutter removal
+    (ChainConfig.clutter_removal)."""
     if not chain.clutter_removal:
         return profiles
     return remove_static_clutter(profiles, per_frame=chain.clutter_removal == "frame")
