@@ -346,8 +346,7 @@ def test_white_noise_power_is_the_monte_carlo_mean(radar, short_chain, clutter):
     power = profile_power(prof, chain)  # (400, doppler, columns)
     w2 = float((window(chain.range_window, radar.n_samples, dtype=torch.float64) ** 2).sum())
     _, frames, loops, ch, bins = prof.shape
-    n_mean = loops if clutter == "frame" else frames * loops
-    closed = white_noise_power(torch.tensor(w2, dtype=torch.float64), chain, n_mean, ch, bins)
+    closed = white_noise_power(torch.tensor(w2, dtype=torch.float64), chain, frames, loops, ch, bins)
     rows = power.mean(dim=(0, 2))  # (doppler,)
     se = power.mean(dim=2).std(dim=0) / 400**0.5
     assert ((rows - closed).abs() < 5 * se).all()

@@ -367,7 +367,7 @@ def test_noise_under_coherence_below_one(radar, short_chain):
         ratio = float(shown.sum() / own.sum())
         level = closed.effect("noise").noise_power(signal) * ratio
         f, l, ch, bins = signal.shape[-4:]
-        floor = white_noise_power(level.reshape(-1), short_chain, f * l, ch, bins)[..., None]
+        floor = white_noise_power(level.reshape(-1), short_chain, f, l, ch, bins)[..., None]
         torch.testing.assert_close(closed.render(prof), power_to_unit(shown + floor, short_chain), atol=1e-6, rtol=0)
 
         drawn = Simulator(radar, short_chain, coherence=c, effects=["noise"],

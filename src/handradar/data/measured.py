@@ -196,7 +196,7 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
     if extra:
         raise FormatError(path, f"unknown radar field 'radar.{extra[0]}'; expected {list(RADAR_FIELDS)}, clutter_removal")
     clutter = radar_raw.get("clutter_removal", True)
-    if not (isinstance(clutter, bool) or clutter in CLUTTER_REMOVALS and isinstance(clutter, str)):
+    if type(clutter) not in (bool, str) or clutter not in CLUTTER_REMOVALS:  # a bare 0 or 1 is no answer
         raise FormatError(path, f"'radar.clutter_removal' must be true, false or frame, found {clutter!r}")
     ranges = {}
     for k, v in (d.get("motion_ranges") or {}).items():

@@ -325,20 +325,22 @@ def profile_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     return stft_power(clutter_removed(profiles, chain), chain)
 
 
-def white_noise_power(variance: torch.Tensor, chain: ChainConfig, n_chirps: int, n_channels: int,
+def white_noise_power(variance: torch.Tensor, chain: ChainConfig, n_frames: int, n_loops: int, n_channels: int,
                       n_bins: int) -> torch.Tensor:
-    """Expected :func:`profile_power` of white noise, (..., doppler): the same in every column.
+    """Expected :func:`profile_power` of white noise over ``n_frames`` frames of ``n_loops`` chirp loops,
+    (..., doppler): the same in every column.
 
     ``variance`` (any shape ...): E|n|^2 of each per-range-bin value, independent across chirps
     and channels (receiver noise after the range FFT: correlation across bins does not change the
-    summed power). Clutter removal subtracts the mean of ``n_chirps`` values (frames x loops; loops
-    for ``"frame"``), leaving covariance variance (delta - 1 / n_chirps); a windowed DFT bin d then holds
-    variance (sum w^2 - |W(d)|^2 / n_chirps), W the window's DFT: the mean removal notches the
+    summed power). Clutter removal subtracts the mean of N values (frames x loops; a frame's loops
+    for ``"frame"``), leaving covariance variance (delta - 1 / N); a windowed DFT bin d then holds
+    variance (sum w^2 - |W(d)|^2 / N), W the window's DFT: the mean removal notches the
     rows near zero Doppler only. Summed over ``n_channels`` channels and ``n_bins`` bins."""
+    n_mean = n_loops if chain.clutter_removal == "frame" else n_frames * n_loops
     w = window(chain.stft_window, chain.stft_len, dtype=torch.float64)
     per_row = torch.full((chain.n_doppler,), float((w**2).sum()), dtype=torch.float64)
     if chain.clutter_removal:
-        per_row = per_row - torch.fft.fftshift(torch.fft.fft(w, n=chain.n_doppler).abs() ** 2) / n_chirps
+        per_row = per_row - torch.fft.fftshift(torch.fft.fft(w, n=chain.n_doppler).abs() ** 2) / n_mean
     variance = torch.as_tensor(variance)
     if not variance.is_floating_point():
         variance = variance.to(torch.float64)

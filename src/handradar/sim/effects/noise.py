@@ -103,7 +103,7 @@ class Noise(Effect):
         own power it is the expected power of signal + noise exactly (the cross terms have zero mean)."""
         f, l, ch, bins = signal.shape[-4:]
         level = self.noise_power(signal, power_scale).reshape(-1)
-        return white_noise_power(level, chain, l if chain.clutter_removal == "frame" else f * l, ch, bins)[..., None]
+        return white_noise_power(level, chain, f, l, ch, bins)[..., None]
 
     def apply_signal(self, signal, radar, chain, power_scale=None):
         real = signal.real.dtype
