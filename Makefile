@@ -53,9 +53,8 @@ data-efficiency: $(STAMP) ## the data-efficiency runs: 1-36 real rows per gestur
 	$(PY) train.py -m hydra/launcher=joblib +experiment=data_efficiency 'variants=[enhanced_synth]' seed=1,2,3 split.per_class=1,2,4,8,16,36 threads=1 $(ARGS)
 	$(PY) train.py -m hydra/launcher=joblib +experiment=data_efficiency synth.fit_sim=none 'variants=[model_synth_only]' seed=1,2,3 threads=1 $(ARGS)
 
-measured: $(STAMP) ## measured radar (Xia et al.): K = 0-all real rows per class x seeds 1-3, users A and B apart (MANIFEST=FILE: another dataset)
-	$(PY) train.py -m +experiment=measured $(if $(MANIFEST),data.manifest=$(MANIFEST),) split.per_class=1,2,4,8,16,50,all seed=1,2,3 threads=1 trainer.enable_progress_bar=false $(ARGS)
-	$(PY) train.py -m +experiment=measured $(if $(MANIFEST),data.manifest=$(MANIFEST),) split.per_class=0 seed=1,2,3 threads=1 trainer.enable_progress_bar=false $(ARGS)
+measured: $(STAMP) ## measured radar (Xia et al.): K = 0-all real rows per class x seeds 1-3, 2 jobs at a time (MANIFEST=FILE: another dataset)
+	$(PY) train.py -m hydra/launcher=joblib +experiment=measured $(if $(MANIFEST),data.manifest=$(MANIFEST),) split.per_class=0,1,2,4,8,16,50,all seed=1,2,3 threads=1 trainer.enable_progress_bar=false $(ARGS)
 
 data-efficiency-figure: $(STAMP) ## the data-efficiency curve (docs/figures/data_efficiency.png) from the MLflow runs
 	$(PY) -m experiments.data_efficiency $(ARGS)

@@ -21,3 +21,12 @@ EFFECTS: tuple[str, ...] = ("occlusion", "palm", "forearm", "multipath", "antenn
 # Effects that only the reference world renders (Leap and receiver details); iq_imbalance is the
 # diagnosis's out-of-vocabulary control.
 WORLD_ONLY_EFFECTS: tuple[str, ...] = ("dropouts", "calibration", "static_clutter", "iq_imbalance")
+
+# The variants of a measured-radar job (handradar.tasks.measured) and their table columns (handradar.runs.tables),
+# in the order of the tables.
+MEASURED_VARIANTS: dict[str, str] = {
+    "radar_only": "Radar only",
+    "model_synth": "+ synthetic",
+    "synth_pretrain": "synthetic pre-training, fine-tuned",
+    "model_synth_only": "synthetic only",
+}

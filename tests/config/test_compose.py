@@ -26,7 +26,7 @@ from handradar.radar.config import RadarConfig
 from handradar.runs.mlflow import Tracker
 from handradar.sim.factory import SimFactory
 from handradar.sim.simulator import Simulator
-from handradar.tasks.measured import MEASURED_VARIANTS
+from handradar.vocab import MEASURED_VARIANTS
 from tests.tasks.fakes import compose_train
 
 REPO = Path(__file__).resolve().parents[2]

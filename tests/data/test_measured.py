@@ -13,7 +13,7 @@ from handradar.data.datasets import load_arrays
 from handradar.data.hdf5 import read_attrs, validate
 from handradar.data.measured import MeasuredDataset, dataset_chain, read_manifest, synthesis_radar
 from handradar.data.splits import measured_split
-from handradar.errors import FormatError
+from handradar.errors import FormatError, TooFewRows
 
 SHARED_XIA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "xia2021"
 CLASSES = {"wave": ["swipe_left", "swipe_right"], "poke": ["push"], "still": ["idle"]}
@@ -148,6 +148,20 @@ def test_measured_split_nested_and_validation_fixed():
     assert all(np.count_nonzero(labels[t4] == c) == 4 for c in range(3))
 
 
+def test_measured_split_refuses_more_rows_than_a_class_has():
+    """K beyond a class's training rows is an error naming the class (not K rows trained and labelled K), as is a
+    class too small for its validation rows."""
+    labels = np.repeat(np.arange(2), 10)
+    splits = np.array(["train"] * 20)
+    kw = dict(train="train", val_per_class=3, seed=1, classes=["wave", "poke"])
+    with pytest.raises(TooFewRows, match=r"class 'wave' has 7 training rows besides its 3 validation rows: fewer than "
+                                         r"split.per_class=500 \(split.per_class=all takes every one\)"):
+        measured_split(labels, splits, per_class=500, **kw)
+    assert len(measured_split(labels, splits, per_class=7, **kw)[0]) == 14
+    with pytest.raises(TooFewRows, match="class 'wave' has 10 rows in split 'train': too few for 12 validation rows"):
+        measured_split(labels, splits, per_class=1, **{**kw, "val_per_class": 12})
+
+
 @pytest.mark.skipif(not (SHARED_XIA / "OpenSource").is_dir(), reason="Xia et al.'s DTI images are in ../shared only")
 def test_xia2021_manifest(tmp_path):
     manifest = Path(__file__).resolve().parents[2] / "conf" / "manifests" / "xia2021.yaml"
@@ -179,3 +193,12 @@ def test_synthesis_radar_and_chain_hold_the_dataset_grid(tmp_path):
         synthesis_radar(m, shape, {"v_max_m_s": 2.0, "frame_period_s": 0.05, "chirps_per_frame": 64})
     with pytest.raises(ValueError, match="do not fit"):
         synthesis_radar(m, shape, {"v_max_m_s": 0.5, "frame_period_s": 0.02, "chirps_per_frame": 48})
+
+
+def test_zero_doppler_outside_the_axis_is_one_line(tmp_path):
+    """A zero-Doppler index beyond the images' Doppler axis (99 of 48 bins) is refused, naming the manifest."""
+    path = stand_in(tmp_path, axes={"doppler": "columns", "approaching": "low", "zero_doppler": 99})
+    with pytest.raises(FormatError, match=r"manifest.yaml: 'axes.zero_doppler' 99 lies outside the Doppler axis "
+                                          r"of r0.npy \(indices 0..47\)"):
+        MeasuredDataset(path, tmp_path / "cache").path()
+    assert not list((tmp_path / "cache").glob("*.h5"))

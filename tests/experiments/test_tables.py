@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.stats
 
 from experiments import tables
 from handradar.runs.mlflow import Tracker
@@ -249,18 +250,37 @@ def test_a_row_from_a_dirty_tree_is_marked_in_the_table():
 
 
 def test_measured_rows_per_split_and_k():
-    """A measured job's metrics become rows "K per class, <split> {measured: <manifest>}", one column a variant."""
-    p = {"job": "handradar.tasks.measured.run_measured", "split.per_class": "8", "seed": "1",
-         "data.dataset._target_": "handradar.data.measured.MeasuredDataset",
+    """A measured job's metrics become rows "K per class, <split> {measured: <manifest>}", one column a variant; which
+    variants, splits and K come from its parameters, not from the metric names."""
+    p = {"job": "handradar.tasks.measured.run_measured", "measured.per_class": "8", "seed": "1",
+         "measured.variants": "radar_only,model_synth,model_synth_only", "measured.tests": "A,B",
+         "measured.setting": "s1", "data.dataset._target_": "handradar.data.measured.MeasuredDataset",
          "data.dataset.manifest": "/any/where/xia2021.yaml"}
     metrics = {"test/acc_radar_only_A": 0.5, "test/acc_radar_only_B": 0.6, "test/acc_model_synth_only_A": 0.25,
                "test/acc_model_synth_B": 0.7, "val/acc_radar_only": 0.9}
     text = job_table(p, metrics)
     assert "| 8 per class, A {measured: xia2021} | 0.500 | – | – | 0.250 |" in text
     assert "| 8 per class, B {measured: xia2021} | 0.600 | 0.700 | – | – |" in text
-    assert "only_A" not in text  # model_synth_only's metric is not model_synth's
     assert "/any/where" not in text and "0.900" not in text  # validation is for choosing, not for the table
-    tables = build_tables([{"params": {**p, "split.per_class": "all"}, "metrics": {"test/acc_radar_only_A": 0.7}},
+    tables = build_tables([{"params": {**p, "measured.per_class": "all"}, "metrics": {"test/acc_radar_only_A": 0.7}},
                            {"params": p, "metrics": metrics}])
     rows = tables[0].sorted_rows()
     assert rows.index("8 per class, A {measured: xia2021}") < rows.index("all per class, A {measured: xia2021}")
+
+
+def test_measured_gain_is_paired_by_seed_with_its_interval():
+    """Each synthetic variant's gain over radar only is the difference within each job (same seed and rows), with a
+    95 % Student-t interval over the seeds; a job of another setting gets rows of its own, never mixed in."""
+    def job(seed: int, base: float, synth: float, setting: str = "s1") -> dict:
+        p = {"job": "handradar.tasks.measured.run_measured", "measured.per_class": "1", "seed": str(seed),
+             "measured.variants": "radar_only,model_synth", "measured.tests": "A", "measured.setting": setting,
+             "data.dataset._target_": "handradar.data.measured.MeasuredDataset", "data.dataset.manifest": "x.yaml"}
+        return {"params": p, "metrics": {"test/acc_radar_only_A": base, "test/acc_model_synth_A": synth}}
+
+    records = [job(1, 0.30, 0.40), job(2, 0.50, 0.55), job(3, 0.40, 0.45), job(1, 0.9, 0.1, setting="s0")]
+    gain = next(t for t in build_tables(records) if t.name == "measured_gain")
+    diffs = [0.10, 0.05, 0.05]
+    half = scipy.stats.t.ppf(0.975, 2) * np.std(diffs, ddof=1) / np.sqrt(3)
+    cell = f"+{np.mean(diffs):.3f} [{np.mean(diffs) - half:+.3f}, +{np.mean(diffs) + half:.3f}] (n=3)"
+    assert f"| 1 per class, A {{measured: x}} | {cell} | – | – |" in gain.markdown()
+    assert "| 1 per class, A {measured: x} [setting s0] | -0.800 (n=1) | – | – |" in gain.markdown()

@@ -1,4 +1,5 @@
-"""ResNet classifiers for 1 x 64 x 32 spectrograms: shapes, adapted stem, learning on separable data."""
+"""Classifiers for 1 x 64 x 32 spectrograms (ResNets, the compact CNN): shapes, adapted stem, the transferable
+backbone, learning on separable data."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from torch import nn
 
 from handradar.models.classifiers import (
     backbone_state,
+    compact_cnn,
     replace_head,
     resnet18,
     resnet50,
@@ -131,3 +133,28 @@ def test_resnet50_learns_separable_classes():
     recompute_bn_stats(net, x)
     acc, _ = evaluate(net, tx, ty, 4)
     assert acc >= 0.9
+
+
+@pytest.mark.parametrize("shape", [(64, 32), (64, 64), (32, 16)])
+def test_compact_cnn_sizes_and_head(shape):
+    """Any input of at least 2^3 a side gives (B, classes) logits; the head is ``fc`` alone, so pre-training moves
+    every convolution and BatchNorm and no head (backbone_state)."""
+    net = compact_cnn(5, channels=(16, 32, 64), pooled=(4, 4)).eval()
+    assert net(torch.rand(3, 1, *shape)).shape == (3, 5)
+    assert sum(p.numel() for p in net.parameters()) < 40_000
+    state = backbone_state(net)
+    fresh = compact_cnn(8)
+    missing, unexpected = fresh.load_state_dict(state, strict=False)
+    assert set(missing) == {"fc.weight", "fc.bias"} and not unexpected
+
+
+def test_compact_cnn_learns_separable_classes():
+    torch.manual_seed(0)
+    x, y = _separable(6, 4, seed=0)
+    net = compact_cnn(4)
+    tx, ty = _separable(10, 4, seed=1)
+    before, _ = evaluate(net, tx, ty, 4)
+    _train(net, x, y, steps=60, lr=5e-3)
+    recompute_bn_stats(net, x)
+    acc, _ = evaluate(net, tx, ty, 4)
+    assert before < 0.6 and acc >= 0.9, (before, acc)

@@ -20,6 +20,7 @@ from handradar.synthesis.measured import (
     finish_rows,
     fit_unknowns,
     mirror_doppler,
+    UnknownsFit,
     refloor,
     synthesize_measured,
 )
@@ -77,6 +78,10 @@ def test_fit_recovers_known_unknowns(tmp_path):
                            objective=objective)
         assert fit.values == {**TRUTH, "noise_db": None, "noise_looks": 1}, objective
     assert fit.shares["approaching"]["low"] > 0.9 and fit.n_rows == 24
+    # label-free: one pooled class of the measured rows against one of the synthetic rows, no label on either side
+    pooled = fit_unknowns(real.x[rows], np.zeros(len(rows), np.int64), 1, lambda r: (lambda m: m and (m[0], 0 * m[1]))(
+        simulate(r)), grid, n_boot=50, seed=0)
+    assert pooled.values == {**TRUTH, "noise_db": None, "noise_looks": 1} and pooled.shares["approaching"]["low"] > 0.9
     # v_max 0.5 m/s needs loops of 1.95 ms: 32 of them fit in no 40 ms frame, so that radar is no candidate (16 do)
     assert not any(c["v_max_m_s"] == 0.5 and c["frame_period_s"] == 0.04 and c["chirps_per_frame"] == 32
                    for c in fit.candidates)
@@ -154,3 +159,21 @@ def test_mirror_doppler_about_the_zero_row():
     y = mirror_doppler(x)
     assert y[0, 32 - 7, 1] == 1.0 and y[0, 32, 2] == 2.0
     assert np.array_equal(mirror_doppler(y), x)
+
+
+def test_one_row_per_class_has_no_bootstrap_uncertainty():
+    """With one row in a class every resample is the same rows: the fit says it cannot estimate its uncertainty
+    rather than report each value "chosen by 100 % of resamples"."""
+    rng = np.random.default_rng(0)
+    real_x, real_y = rng.random((2, 8, 6)).astype(np.float32), np.array([0, 1])
+
+    def simulate(radar: dict):
+        return np.clip(real_x + 0.01 * radar["v_max_m_s"], 0, 1), real_y
+
+    grid = {"v_max_m_s": [0.0, 5.0], "frame_period_s": [0.04], "dynamic_range_db": [60.0], "approaching": ["high"]}
+    fit = fit_unknowns(real_x, real_y, 2, simulate, grid, n_boot=30, seed=0)
+    assert fit.values["v_max_m_s"] == 0.0 and fit.n_boot == 0 and fit.shares == {} and fit.ranges == {}
+    assert "uncertainty not estimated: a class has fewer than 2 rows" in fit.summary()
+    assert UnknownsFit.from_dict(fit.as_dict()) == fit
+    two = fit_unknowns(np.concatenate([real_x, real_x]), np.array([0, 1, 0, 1]), 2, simulate, grid, n_boot=30, seed=0)
+    assert two.n_boot == 30 and "chosen by 100% of resamples" in two.summary()

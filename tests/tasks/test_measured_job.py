@@ -4,20 +4,24 @@ the metrics of each split, the unpaired gap report; and K = 0 (synthetic only)."
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
+import numpy as np
 import pytest
 
+from handradar.tasks.measured import MeasuredRows, MeasuredSetup, label_budget
 from handradar.tasks.train import run
+from handradar.vocab import MEASURED_VARIANTS
 from tests.synthesis.test_measured_fit import TRUTH, measured_stand_in
 from tests.tasks.fakes import compose_train
 
 
 def overrides(tmp_path, manifest, *extra: str) -> list[str]:
     return ["+experiment=measured", f"data.manifest={manifest}", f"paths.log_dir={tmp_path}/logs",
-            f"paths.cache_dir={tmp_path}/cache", "model.net._target_=tests.tasks.fakes.tiny_cnn", "~model.net.stem_stride",
-            "logger=none", "checkpoint_interval_s=0", "trainer.max_steps=10", "print_table=false",
+            f"paths.cache_dir={tmp_path}/cache", "model.net.channels=[8,16]",
+            "logger=none", "checkpoint_interval_s=0", "recipe.epochs=2", "recipe.min_steps=6", "print_table=false",
             "trainer.enable_progress_bar=false", "split.val_per_class=2", "synth.measured.per_class=4",
-            "synth.measured.fit.per_class=4", "synth.measured.fit.n_boot=20",
+            "synth.measured.fit.per_class=8", "synth.measured.fit.n_boot=20",
             "synth.measured.fit.grid.v_max_m_s=[2.0,4.0]", "synth.measured.fit.grid.frame_period_s=[0.04]",
             "synth.measured.fit.grid.dynamic_range_db=[20.0]", *extra]
 
@@ -51,13 +55,16 @@ def test_unknown_variant_is_one_line(tmp_path):
         run(cfg, tmp_path / "run")
 
 
-def test_real_share_of_the_batches(tmp_path):
+def test_real_share_of_the_batches(tmp_path, capsys):
     measured_stand_in(tmp_path / "data")
     extra = ("split.per_class=2", "variants=[model_synth]", "synth.measured.fit.grid.chirps_per_frame=[16]",
              "synth.measured.fit.grid.noise_db=[null]")
-    cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", *extra, "synth.measured.real_share=0.5"))
+    cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", *extra, "synth.measured.real_share=0.5",
+                                  "print_table=true"))
     metrics = json.loads((run(cfg, tmp_path / "run") / "metrics.json").read_text())
     assert set(metrics) == {"val/acc_model_synth", "test/acc_model_synth_test"}
+    # the table the job prints reads the variants, splits and K the job logged
+    assert f"| 2 per class, test {{measured: m}} | – | {metrics['test/acc_model_synth_test']:.3f} |" in capsys.readouterr().out
     cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", *extra, "synth.measured.real_share=1.5"))
     with pytest.raises(ValueError, match=r"real_share must lie in \(0, 1\)"):
         run(cfg, tmp_path / "run2")
@@ -78,3 +85,47 @@ def test_synthetic_only_adapts_batchnorm_to_the_fit_rows(tmp_path, monkeypatch):
         run(cfg, tmp_path / f"run-{adapt}")
     fit = json.loads(next((tmp_path / "cache" / "synth").glob("measured-fit-*.json")).read_text())
     assert seen == [fit["n_rows"]]
+
+
+def test_fit_keeps_the_labelled_budget(tmp_path, monkeypatch):
+    """fit.rows=unlabelled (the default) hands the fit the pool's images without a label (one pooled class, at any
+    K); fit.rows=labelled the job's K rows per class with theirs. Nothing else reaches the fit."""
+    import handradar.tasks.measured as measured_job
+
+    seen, fit = [], measured_job.fit_unknowns
+    monkeypatch.setattr(measured_job, "fit_unknowns",
+                        lambda x, y, n, *a, **kw: (seen.append((len(x), sorted(set(y.tolist())), n)), fit(x, y, n, *a, **kw))[1])
+    measured_stand_in(tmp_path / "data")
+    for rows in ("unlabelled", "labelled"):
+        cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", "split.per_class=2", "variants=[model_synth]",
+                                      f"synth.measured.fit.rows={rows}"))
+        run(cfg, tmp_path / f"run-{rows}")
+    # 3 classes of 9 training rows, 2 of each for validation: a pool of 21 rows; K = 2: 6 labelled rows
+    assert seen == [(21, [0], 1), (6, [0, 1, 2], 3)]
+
+
+def test_setup_is_checked_before_any_fit(tmp_path, monkeypatch):
+    import handradar.tasks.measured as measured_job
+
+    monkeypatch.setattr(measured_job, "fit_unknowns", lambda *a, **kw: pytest.fail("the fit ran before the check"))
+    measured_stand_in(tmp_path / "data")
+    for extra, message in [(("split.per_class=0", "synth.measured.fit.rows=labelled"), "K = 0 has none"),
+                           (("synth.measured.real_share=1.5",), r"real_share must lie in \(0, 1\)"),
+                           (("synth.measured.fit.rows=pool",), "fit.rows must be one of"),
+                           (("split.per_class=-1",), "split.per_class must be a count >= 0 or all")]:
+        cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", *extra))
+        with pytest.raises(ValueError, match=message):
+            run(cfg, tmp_path / "run")
+
+
+def test_each_variant_budget():
+    """What each variant uses, with labels and without, at K = 2 of 3 classes and a pool of 21 rows."""
+    rows = MeasuredRows(train=np.arange(6), val=np.arange(6), pool=np.arange(21), tests={})
+    setup = MeasuredSetup(per_class=2, val_per_class=2, test_seed=0, variants=tuple(MEASURED_VARIANTS),
+                          fit_rows="unlabelled", real_share=0.5, adapt_bn=True, synth_per_class=4)
+    assert label_budget(setup, rows) == {"radar_only": {"labelled": 6, "unlabelled": 0},
+                                         "model_synth": {"labelled": 6, "unlabelled": 21},
+                                         "synth_pretrain": {"labelled": 6, "unlabelled": 21},
+                                         "model_synth_only": {"labelled": 0, "unlabelled": 21}}
+    labelled = label_budget(replace(setup, fit_rows="labelled", adapt_bn=False), rows)
+    assert labelled["model_synth_only"] == {"labelled": 6, "unlabelled": 0} and labelled["model_synth"]["unlabelled"] == 0

@@ -10,7 +10,8 @@ from handradar.viz.measured import plot_measured_curve
 
 def record(k: str, seed: int, acc: float, variant: str = "radar_only") -> dict:
     params = {"data.dataset._target_": "handradar.data.measured.MeasuredDataset", "data.dataset.manifest": "m/x.yaml",
-              "split.per_class": k, "seed": str(seed), "job": "handradar.tasks.measured.run_measured"}
+              "measured.per_class": k, "seed": str(seed), "job": "handradar.tasks.measured.run_measured",
+              "measured.variants": variant, "measured.tests": "A,B", "measured.setting": "s"}
     return {"params": params, "metrics": {f"test/acc_{variant}_A": acc, f"test/acc_{variant}_B": acc + 0.1}}
 
 

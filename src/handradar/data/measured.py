@@ -311,6 +311,9 @@ def to_unit(a: np.ndarray, m: Manifest, path: Path) -> np.ndarray:
         a = a.T
     n = a.shape[0]
     zero = (n // 2) if m.zero_doppler is None else m.zero_doppler
+    if not 0 <= zero <= n - 1:
+        raise FormatError(m.path, f"'axes.zero_doppler' {zero:g} lies outside the Doppler axis of {path.name} "
+                                  f"(indices 0..{n - 1})")
     if m.approaching == "low":  # flip, the zero row with it
         a, zero = a[::-1], n - 1 - zero
     a = np.roll(a, n // 2 - int(round(zero)), axis=0)  # the Doppler axis is periodic (an FFT's)

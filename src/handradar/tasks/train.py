@@ -157,6 +157,30 @@ def nuisance_draw(sim: dict, spread: dict, rng: np.random.Generator) -> dict:
     return out
 
 
+def recipe_steps(recipe: Any, n_rows: int, batch_size: int) -> int | None:
+    """Optimizer steps of a fit on ``n_rows`` by the training ``recipe`` (conf/recipe/): ``epochs`` passes over the
+    rows in batches of ``batch_size`` (capped at the rows, as the DataModule caps it), at least ``min_steps``; None
+    where the recipe counts no epochs (``trainer.max_steps`` holds)."""
+    epochs = recipe.get("epochs") if recipe else None
+    if epochs is None:
+        return None
+    if int(epochs) < 1 or n_rows < 1:
+        raise ValueError(f"recipe.epochs must be >= 1 on at least one row, found {epochs} on {n_rows} rows")
+    per_epoch = -(-n_rows // max(1, min(batch_size, n_rows)))
+    return max(int(epochs) * per_epoch, int(recipe.get("min_steps") or 0))
+
+
+def recipe_scheduler(recipe: Any, model: Any, total_steps: int) -> Callable | None:
+    """The learning-rate schedule of a fit: the recipe's ``schedule`` (``cosine``: to 0 over ``total_steps``
+    optimizer steps; ``constant`` or unset: ``model.scheduler``, null by default)."""
+    schedule = str((recipe or {}).get("schedule") or "constant")
+    if schedule == "cosine":
+        return lambda opt: torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(1, int(total_steps)))
+    if schedule != "constant":
+        raise ValueError(f"recipe.schedule must be constant or cosine, found {schedule!r}")
+    return instantiate(model.scheduler) if model.get("scheduler") else None
+
+
 def _rows(part: FileRows | ArrayRows) -> int:
     if isinstance(part, ArrayRows):
         return len(part.y)
@@ -180,6 +204,12 @@ class Job:
         self.state: Path
         self.stages = Stages([])
         self._extra: dict[str, list[FileRows | ArrayRows]] = {}  # what a variant adds, made once per job
+        self.params: dict[str, Any] = {}  # what the job found out and logged (split sizes, fitted values, ...)
+
+    def log_params(self, params: dict[str, Any]) -> None:
+        """Log parameters the job found out to its MLflow run, and keep them for the table it prints."""
+        self.params.update(params)
+        self.tracker.log_params(params)
 
     # ---- job life cycle ---------------------------------------------------------------------
     def run(self) -> dict[str, float]:
@@ -296,16 +326,17 @@ class Job:
     def _callbacks(self) -> list:
         return [instantiate(c) for c in (self.cfg.get("callbacks") or {}).values() if c is not None]
 
-    def _eval_device(self) -> str:
+    def eval_device(self) -> str:
+        """Where evaluation runs: the GPU when the trainer trains on one, else the CPU."""
         accel = str(self.cfg.trainer.get("accelerator", "cpu"))
         return "cuda" if accel in ("gpu", "cuda", "auto") and torch.cuda.is_available() else "cpu"
 
     def fit_classifier(self, name: str, parts: list[FileRows | ArrayRows], num_classes: int, *,
                        init: dict[str, torch.Tensor] | None = None, overrides: dict | None = None,
                        shares: list[float] | None = None) -> torch.nn.Module:
-        """Train ``model.net`` on the training ``parts`` (through a DataModule), resumably; the same
-        initial weights for every variant of a seed. ``shares``: each part's share of the batches (None: as many
-        as its rows)."""
+        """Train ``model.net`` on the training ``parts`` (through a DataModule) by the training ``recipe``, resumably;
+        the same initial weights for every variant of a seed. ``shares``: each part's share of the batches (None: as
+        many as its rows). ``overrides``: Trainer settings that win over the recipe's length."""
         cfg = self.cfg
         pl.seed_everything(self.seed, verbose=False)
         net = instantiate(cfg.model.net, num_classes=num_classes)
@@ -313,24 +344,29 @@ class Job:
             missing, unexpected = net.load_state_dict(init, strict=False)
             if unexpected or any(not k.startswith("fc.") for k in missing):
                 raise RuntimeError(f"pre-trained weights do not fit {name}: missing {missing}, unexpected {unexpected}")
-        scheduler = instantiate(cfg.model.scheduler) if cfg.model.get("scheduler") else None
-        module = ClassifierModule(net, num_classes, instantiate(cfg.model.optimizer), scheduler, prefix=f"{name}/")
         data = TrainingRowsDataModule(parts, batch_size=int(cfg.data.batch_size), seed=self.seed,
                                       num_workers=int(cfg.data.num_workers), shares=shares)
+        recipe = cfg.get("recipe") or {}
+        steps = recipe_steps(recipe, len(data), int(cfg.data.batch_size))
+        overrides = {**({} if steps is None else {"max_steps": steps, "max_epochs": -1}), **(overrides or {})}
+        module = ClassifierModule(net, num_classes, instantiate(cfg.model.optimizer),
+                                  recipe_scheduler(recipe, cfg.model, overrides.get("max_steps", cfg.trainer.max_steps)),
+                                  prefix=f"{name}/", augment=instantiate(recipe["augment"]) if recipe.get("augment") else None,
+                                  mixup=float(recipe.get("mixup") or 0.0))
         ckpt_dir = self.state / name / "checkpoints"
         trainer = make_trainer(cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
                                callbacks=self._callbacks(), overrides=overrides,
                                checkpoint_interval_s=float(cfg.get("checkpoint_interval_s", 0)))
         resumable_fit(trainer, module, data, ckpt_dir)
         if cfg.model.get("precise_bn", True):
-            recompute_bn_stats(module.net, data.arrays()[0], device=self._eval_device())
+            recompute_bn_stats(module.net, data.arrays()[0], device=self.eval_device())
         return module.net
 
     def train_and_test(self, name: str, parts: list[FileRows | ArrayRows], test_rows: np.ndarray, num_classes: int,
                        classes: list[str], *, test_y: np.ndarray | None = None, **kw) -> dict:
         net = self.fit_classifier(name, parts, num_classes, **kw)
         ty = self.real.y[test_rows] if test_y is None else test_y
-        acc, cm = evaluate(net, self.real.x[test_rows], ty, num_classes, device=self._eval_device())
+        acc, cm = evaluate(net, self.real.x[test_rows], ty, num_classes, device=self.eval_device())
         log.info("%s: test accuracy %.4f on %d rows", name, acc, len(ty))
         return {"acc": acc, "confusion": cm.tolist(), "classes": classes, "n_train": sum(_rows(p) for p in parts),
                 "n_test": int(len(ty)),
@@ -574,15 +610,16 @@ def run(cfg: DictConfig, run_dir: str | Path | None = None) -> Path:
         run_dir = HydraConfig.get().runtime.output_dir
     run_dir = Path(run_dir).resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
+    job = Job(cfg, run_dir)
     try:
-        metrics = Job(cfg, run_dir).run()
+        metrics = job.run()
     except BaseException as exc:
         if _is_rank_zero():
             with contextlib.suppress(Exception):
                 atomic_write_text(run_dir / "error.txt", f"{type(exc).__name__}: {exc}\n")
         raise
     if _is_rank_zero() and cfg.get("print_table", True):
-        params = {k: str(v) for k, v in flatten(OmegaConf.to_container(cfg, resolve=True)).items()}
+        params = {k: str(v) for k, v in {**flatten(OmegaConf.to_container(cfg, resolve=True)), **job.params}.items()}
         if cfg.get("job") == "external_pretrain":  # the row's label, as the MLflow run has it
             params["pretrain.source"] = external_source(cfg)[0]
         print(job_table(params, metrics), flush=True)
