@@ -59,14 +59,6 @@ def mask_band(x: torch.Tensor, start: torch.Tensor, width: torch.Tensor, axis: i
     return x * keep.view(shape).to(x.dtype)
 
 
-def mixup(x: torch.Tensor, y: torch.Tensor, alpha: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, float]:
-    """mixup (Zhang et al. 2018): ``lam x + (1 - lam) x[perm]`` with ``lam ~ Beta(alpha, alpha)`` and a random
-    pairing ``perm``; returns (mixed images, y, y[perm], lam): the loss is ``lam CE(y) + (1 - lam) CE(y[perm])``."""
-    lam = float(torch.distributions.Beta(alpha, alpha).sample()) if alpha > 0 else 1.0
-    perm = torch.randperm(x.shape[0], device=x.device)
-    return lam * x + (1.0 - lam) * x[perm], y, y[perm], lam
-
-
 class SpectrogramAugment(nn.Module):
     """The recipe's augmentations of a training batch, in order, each drawn per image: a time shift of up to
     ``shift`` columns either way, a time stretch by 1 -/+ ``stretch``, a level gain of 1 -/+ ``gain`` and offset of

@@ -12,8 +12,6 @@ from torch.nn import functional as F
 from torchmetrics.classification import MulticlassAccuracy
 from torchmetrics.functional.classification import multiclass_confusion_matrix
 
-from handradar.models.augment import mixup
-
 
 class ClassifierModule(pl.LightningModule):
     """Cross-entropy training of ``net``; logs ``<prefix>train/loss`` and ``<prefix>train/acc`` per epoch.
@@ -21,20 +19,16 @@ class ClassifierModule(pl.LightningModule):
     optimizer: a factory ``params -> torch.optim.Optimizer`` (a Hydra ``_partial_``).
     scheduler: optional factory ``optimizer -> LR scheduler`` stepped once per optimizer step.
     augment: optional label-keeping transform of every training batch (handradar.models.augment.SpectrogramAugment).
-    mixup: the Beta(alpha, alpha) of mixup on every training batch after ``augment`` (0: off); the accuracy logged
-    is then against the first label of each pair.
     """
 
     def __init__(self, net: nn.Module, num_classes: int, optimizer: Callable[[Iterable], torch.optim.Optimizer],
-                 scheduler: Callable | None = None, prefix: str = "", augment: nn.Module | None = None,
-                 mixup: float = 0.0) -> None:
+                 scheduler: Callable | None = None, prefix: str = "", augment: nn.Module | None = None) -> None:
         super().__init__()
         self.net = net
         self.optimizer_factory = optimizer
         self.scheduler_factory = scheduler
         self.prefix = prefix
         self.augment = augment
-        self.mixup = float(mixup)
         self.train_acc = MulticlassAccuracy(num_classes, average="micro")
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -44,13 +38,8 @@ class ClassifierModule(pl.LightningModule):
         x, y = batch
         if self.augment is not None:
             x = self.augment(x)
-        if self.mixup > 0:
-            x, y, y_other, lam = mixup(x, y, self.mixup)
-            logits = self.net(x)
-            loss = lam * F.cross_entropy(logits, y) + (1.0 - lam) * F.cross_entropy(logits, y_other)
-        else:
-            logits = self.net(x)
-            loss = F.cross_entropy(logits, y)
+        logits = self.net(x)
+        loss = F.cross_entropy(logits, y)
         self.train_acc(logits, y)
         self.log(f"{self.prefix}train/loss", loss, on_step=False, on_epoch=True, sync_dist=True, batch_size=len(y))
         self.log(f"{self.prefix}train/acc", self.train_acc, on_step=False, on_epoch=True, batch_size=len(y))

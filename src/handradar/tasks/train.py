@@ -351,8 +351,7 @@ class Job:
         overrides = {**({} if steps is None else {"max_steps": steps, "max_epochs": -1}), **(overrides or {})}
         module = ClassifierModule(net, num_classes, instantiate(cfg.model.optimizer),
                                   recipe_scheduler(recipe, cfg.model, overrides.get("max_steps", cfg.trainer.max_steps)),
-                                  prefix=f"{name}/", augment=instantiate(recipe["augment"]) if recipe.get("augment") else None,
-                                  mixup=float(recipe.get("mixup") or 0.0))
+                                  prefix=f"{name}/", augment=instantiate(recipe["augment"]) if recipe.get("augment") else None)
         ckpt_dir = self.state / name / "checkpoints"
         trainer = make_trainer(cfg.trainer, ckpt_dir=ckpt_dir, seed=self.seed, logger=TrackerLogger(self.tracker),
                                callbacks=self._callbacks(), overrides=overrides,
