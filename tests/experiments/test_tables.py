@@ -270,14 +270,15 @@ def test_measured_rows_per_split_and_k():
 
 def test_measured_gain_is_paired_by_seed_with_its_interval():
     """Each synthetic variant's gain over radar only is the difference within each job (same seed and rows), with a
-    95 % Student-t interval over the seeds; a job of another setting gets rows of its own, never mixed in."""
+    95 % Student-t interval over the seeds; a job of another setting gets rows of its own, never mixed in, even when
+    it is the latest (the setting most runs share keeps the plain rows)."""
     def job(seed: int, base: float, synth: float, setting: str = "s1") -> dict:
         p = {"job": "handradar.tasks.measured.run_measured", "measured.per_class": "1", "seed": str(seed),
              "measured.variants": "radar_only,model_synth", "measured.tests": "A", "measured.setting": setting,
              "data.dataset._target_": "handradar.data.measured.MeasuredDataset", "data.dataset.manifest": "x.yaml"}
         return {"params": p, "metrics": {"test/acc_radar_only_A": base, "test/acc_model_synth_A": synth}}
 
-    records = [job(1, 0.30, 0.40), job(2, 0.50, 0.55), job(3, 0.40, 0.45), job(1, 0.9, 0.1, setting="s0")]
+    records = [job(1, 0.9, 0.1, setting="s0"), job(1, 0.30, 0.40), job(2, 0.50, 0.55), job(3, 0.40, 0.45)]
     gain = next(t for t in build_tables(records) if t.name == "measured_gain")
     diffs = [0.10, 0.05, 0.05]
     half = scipy.stats.t.ppf(0.975, 2) * np.std(diffs, ddof=1) / np.sqrt(3)

@@ -386,15 +386,19 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
 
 
 def measured_settings(records: Sequence[Mapping]) -> dict[str, dict[str, str]]:
-    """Per measured dataset (its :func:`data_setting`), each job setting's row suffix: "" for the setting of the
-    latest run, " [setting <hash>]" for every other, so that no row mixes settings (``measured.setting``: the job's
-    config hash without its seed and K)."""
-    out: dict[str, dict[str, str]] = {}
-    for rec in records:  # the latest first
+    """Per measured dataset (its :func:`data_setting`), each job setting's row suffix: "" for the setting most of its
+    runs share (the latest of equals), " [setting <hash>]" for every other, so that no row mixes settings
+    (``measured.setting``: the job's config hash without its seed and K)."""
+    counts: dict[str, dict[str, int]] = {}
+    for rec in records:  # the latest first: dicts keep that order, and max keeps the first of equals
         p = rec["params"]
         if p.get("job") == MEASURED_JOB:
-            where, setting = data_setting(p, rec.get("tags")), p.get("measured.setting")
-            out.setdefault(where, {}).setdefault(setting, "" if not out.get(where) else f" [setting {setting}]")
+            where = counts.setdefault(data_setting(p, rec.get("tags")), {})
+            where[p.get("measured.setting")] = where.get(p.get("measured.setting"), 0) + 1
+    out = {}
+    for where, settings in counts.items():
+        main = max(settings, key=settings.get)
+        out[where] = {s: "" if s == main else f" [setting {s}]" for s in settings}
     return out
 
 
