@@ -141,13 +141,14 @@ def measured_rows(job: Job, setup: MeasuredSetup) -> MeasuredRows:
     pool = measured_split(real.y, split_of, per_class="all", seed=0, **common)[0]
     rows = MeasuredRows(train=train, val=val, pool=pool, tests={s: np.flatnonzero(split_of == s) for s in m.test})
     job.log_params({"split_sizes.train": len(train), "split_sizes.val": len(val), "split_sizes.pool": len(pool),
-                            **{f"split_sizes.test_{s}": len(r) for s, r in rows.tests.items()}})
+                    **{f"split_sizes.test_{s}": len(r) for s, r in rows.tests.items()}})
     return rows
 
 
 def label_budget(setup: MeasuredSetup, rows: MeasuredRows) -> dict[str, dict[str, int]]:
     """Per variant, how many measured rows it uses with their labels and without (the pool, through the fit's
-    pooled images or AdaBN); validation and test rows are counted in neither: they train nothing."""
+    pooled images or AdaBN; counted even where every unknown is set and nothing is fitted); validation and test
+    rows are counted in neither: they train nothing."""
     k, pool = len(rows.train), len(rows.pool)
     fit_labelled = setup.fit_rows == "labelled"
     fit = {"labelled": k if fit_labelled else 0, "unlabelled": 0 if fit_labelled else pool}
