@@ -324,7 +324,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
                                   "(mean [95 % t-interval] over seeds)", synthetic, signed=tuple(synthetic), interval=True)
     seen: set[tuple] = set()  # (table, row, column, seed): records come latest first, the latest run counts
     records = list(records)
-    latest_setting = measured_settings(records)
+    setting_suffix = measured_settings(records)
     for rec in records:
         p, metrics = rec["params"], rec["metrics"]
         kind, where = p.get("split.kind", "few_shot"), data_setting(p, rec.get("tags"))
@@ -336,7 +336,7 @@ def build_tables(records: Iterable[Mapping]) -> list[Table]:
                         synth.add(row + where, label, value, (i, where), rec.get("provenance"))
             continue
         if p.get("job") == MEASURED_JOB:
-            _add_measured(measured, gain, rec, where + latest_setting.get(where, {}).get(p.get("measured.setting"), ""),
+            _add_measured(measured, gain, rec, where + setting_suffix.get(where, {}).get(p.get("measured.setting"), ""),
                           seen)
             continue
         if p.get("job") not in ("variants", "external_pretrain"):
