@@ -159,20 +159,3 @@ def test_compact_cnn_learns_separable_classes():
     acc, _ = evaluate(net, tx, ty, 4)
     assert before < 0.6 and acc >= 0.9, (before, acc)
 
-
-def test_dti_cnn_has_the_published_layer_sizes():
-    """model=dti_cnn against the initialisers of Xia et al.'s DTI_CNN_Net.onnx: convolutions 16x1x3x3, 32x16x3x3,
-    64x32x3x3 (each with its bias, which BatchNorm makes redundant here), fc1 128x64x8x8, fc2 8x128, four BatchNorm
-    vectors per convolution; a 64 x 64 image reaches fc1 as 64 x 8 x 8."""
-    from hydra.utils import instantiate
-
-    from tests.tasks.fakes import compose_train
-
-    cfg = compose_train(["+experiment=measured", "model=dti_cnn"])
-    net = instantiate(cfg.model.net, num_classes=8)
-    onnx_weights = (16 * 9 + 16) + (32 * 16 * 9 + 32) + (64 * 32 * 9 + 64) + (128 * 64 * 64 + 128) + (8 * 128 + 8)
-    conv_biases, bn_affine = 16 + 32 + 64, 2 * (16 + 32 + 64)
-    assert sum(p.numel() for p in net.parameters()) == onnx_weights - conv_biases + bn_affine
-    hidden = [m for m in net.features if isinstance(m, torch.nn.Linear)]
-    assert [tuple(m.weight.shape) for m in hidden] == [(128, 64 * 8 * 8)] and tuple(net.fc.weight.shape) == (8, 128)
-    assert net.eval()(torch.rand(2, 1, 64, 64)).shape == (2, 8)

@@ -34,12 +34,11 @@ def resnet50(num_classes: int, *, in_channels: int = 1, stem_stride: int = 1) ->
 
 
 def compact_cnn(num_classes: int, *, in_channels: int = 1, channels: tuple[int, ...] = (16, 32, 64),
-                pooled: tuple[int, int] = (4, 4), hidden: int | None = None, dropout: float = 0.3) -> nn.Module:
+                pooled: tuple[int, int] = (4, 4), dropout: float = 0.3) -> nn.Module:
     """A plain CNN for small spectrogram sets (0.03 M parameters at the defaults) on (B, in_channels, D, T) inputs
     of any size >= 2^len(channels) a side: per entry of ``channels`` a 3x3 convolution, BatchNorm, ReLU and 2x2
-    max-pooling; then adaptive average pooling to ``pooled`` (Doppler, time) cells, with ``hidden`` a linear layer
-    of that width and ReLU, dropout and one linear layer ``fc`` (the head that :func:`backbone_state` leaves out).
-    Logits (B, num_classes)."""
+    max-pooling; then adaptive average pooling to ``pooled`` (Doppler, time) cells, dropout and one linear layer
+    ``fc`` (the head that :func:`backbone_state` leaves out). Logits (B, num_classes)."""
     pooled = (int(pooled[0]), int(pooled[1]))
     layers: list[nn.Module] = []
     width = in_channels
@@ -47,12 +46,8 @@ def compact_cnn(num_classes: int, *, in_channels: int = 1, channels: tuple[int, 
         layers += [nn.Conv2d(width, c, 3, padding=1, bias=False), nn.BatchNorm2d(c), nn.ReLU(inplace=True),
                    nn.MaxPool2d(2)]
         width = c
-    layers += [nn.AdaptiveAvgPool2d(pooled), nn.Flatten()]
-    width *= pooled[0] * pooled[1]
-    if hidden:
-        layers += [nn.Linear(width, int(hidden)), nn.ReLU(inplace=True)]
-        width = int(hidden)
-    return _CompactCNN(nn.Sequential(*layers, nn.Dropout(dropout)), nn.Linear(width, num_classes))
+    return _CompactCNN(nn.Sequential(*layers, nn.AdaptiveAvgPool2d(pooled), nn.Flatten(), nn.Dropout(dropout)),
+                       nn.Linear(width * pooled[0] * pooled[1], num_classes))
 
 
 class _CompactCNN(nn.Module):
