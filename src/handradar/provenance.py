@@ -54,6 +54,8 @@ def commit_of(version: str) -> str:
 
 
 def _canonical(obj: object) -> object:
+    if hasattr(obj, "__canonical__"):  # a value that hashes as an earlier form did (earlier cache keys hold)
+        return obj.__canonical__()
     if hasattr(obj, "__dataclass_fields__"):  # a field added later with metadata {"hash_if_set": True} counts when set
         return {k: _canonical(getattr(obj, k)) for k, f in obj.__dataclass_fields__.items()
                 if k != "source" and not (f.metadata.get("hash_if_set") and getattr(obj, k) is None)}

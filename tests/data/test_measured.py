@@ -11,7 +11,8 @@ import yaml
 
 from handradar.data.datasets import load_arrays
 from handradar.data.hdf5 import read_attrs, validate
-from handradar.data.measured import MeasuredDataset, dataset_chain, read_manifest, synthesis_radar
+from handradar.data.measured import MeasuredDataset, dataset_chain, read_manifest
+from handradar.synthesis.measured import synthesis_radar
 from handradar.data.splits import measured_split
 from handradar.errors import FormatError, TooFewRows
 
@@ -33,7 +34,7 @@ def stand_in(root: Path, *, n: int = 5, shape: tuple[int, int] = (32, 48), **man
     m = {"format": "handradar.measured/1", "name": "standin", "root": "data",
          "rows": {"layout": "rows/{class}/*.npy", "test_fraction": 0.4, "seed": 3},
          "axes": {"doppler": "columns", "approaching": "low", "zero_doppler": 20},
-         "radar": {"carrier_hz": 60.0e9, "clutter_removal": True}, "classes": CLASSES, **manifest}
+         "radar": {"carrier_hz": 60.0e9}, "classes": CLASSES, **manifest}
     path = root / "manifest.yaml"
     (root / "data").symlink_to(root, target_is_directory=True)
     path.write_text(yaml.safe_dump(m, sort_keys=False))
@@ -56,7 +57,7 @@ def test_stand_in_through_its_manifest_alone(tmp_path):
         assert sorted(splits) == ["test", "test", "train", "train", "train"]
     attrs = read_attrs(path)
     assert attrs["skeletons"] == "none" and "radar_cfg" not in attrs
-    assert attrs["chain"].stft_len == 48 and attrs["chain"].n_columns == 32 and attrs["chain"].clutter_removal
+    assert attrs["chain"].stft_len == 48 and attrs["chain"].n_columns == 32 and attrs["chain"].clutter_removal == "window"
 
 
 def test_orientation_from_first_principles(tmp_path):
@@ -71,8 +72,9 @@ def test_orientation_from_first_principles(tmp_path):
 
 
 def test_frame_clutter_removal_reaches_the_chain(tmp_path):
-    """radar.clutter_removal: frame (each frame's own mean, handradar.radar.chain) is the dataset chain's setting."""
-    path = MeasuredDataset(_edit(stand_in(tmp_path), radar__clutter_removal="frame"), tmp_path / "cache").path()
+    """processing.clutter_removal: frame (each frame's own mean, handradar.radar.chain) is the dataset chain's
+    setting."""
+    path = MeasuredDataset(stand_in(tmp_path, processing={"clutter_removal": "frame"}), tmp_path / "cache").path()
     assert read_attrs(path)["chain"].clutter_removal == "frame"
 
 
@@ -101,8 +103,16 @@ def _edit(path: Path, **changes) -> Path:
     ({"axes__approaching": "up"}, "'axes.approaching' must be high, low or unknown"),
     ({"format": "x/1"}, "'format' must be 'handradar.measured/1'"),
     ({"radar__v_max_m_s": -1}, "'radar.v_max_m_s' must be a positive number or unknown"),
-    ({"radar__clutter_removal": "sometimes"}, "'radar.clutter_removal' must be true, false or frame"),
-    ({"radar__clutter_removal": 1}, "'radar.clutter_removal' must be true, false or frame"),
+    ({"radar__clutter_removal": "frame"}, "'radar.clutter_removal' is now 'processing.clutter_removal'"),
+    ({"radar__chirps_per_frame": 12.5}, "'radar.chirps_per_frame' must be a positive whole number or unknown"),
+    ({"processing": {"clutter_removal": True}}, "'processing.clutter_removal' must be one of ['none', 'window'"),
+    ({"processing": {"scale": "log"}}, "'processing.scale' must be one of ['db', 'linear'] or unknown"),
+    ({"processing": {"normalise": "column"}}, "'processing.normalise' must be one of ['image', 'frame', 'none'] or unknown"),
+    ({"processing": {"range": "max"}}, "'processing.range' must be one of ['sum', 'strongest']"),
+    ({"processing": {"cfar": {"guard": 2}}}, "'processing.cfar' must be {guard: cells, training: cells, threshold_db"),
+    ({"processing": {"threshold": 2}}, "'processing.threshold' must be a value in [0, 1) or null"),
+    ({"processing": {"doppler_fft": 16}}, "'processing.doppler_fft' 16 is fewer than the images' 48 Doppler rows"),
+    ({"processing": {"mti": True}}, "unknown processing step 'processing.mti'"),
 ])
 def test_bad_manifest_is_one_line(tmp_path, change, expected):
     path = _edit(stand_in(tmp_path), **change)
@@ -189,7 +199,7 @@ def test_synthesis_radar_and_chain_hold_the_dataset_grid(tmp_path):
     chain = dataset_chain(m, shape, radar.n_loops)
     assert (chain.stft_len, chain.stft_hop, chain.n_doppler, chain.n_columns) == (16, 16, 48, 32)
     assert synthesis_radar(m, shape, {"v_max_m_s": 2.0, "frame_period_s": 0.05, "chirps_per_frame": None}).n_loops == 48
-    with pytest.raises(ValueError, match="expected 2 to the 48 Doppler bins"):
+    with pytest.raises(ValueError, match="expected 2 to the 48 bins of its Doppler FFT"):
         synthesis_radar(m, shape, {"v_max_m_s": 2.0, "frame_period_s": 0.05, "chirps_per_frame": 64})
     with pytest.raises(ValueError, match="do not fit"):
         synthesis_radar(m, shape, {"v_max_m_s": 0.5, "frame_period_s": 0.02, "chirps_per_frame": 48})

@@ -56,3 +56,35 @@ def test_report_names_the_shifted_class_and_statistic(tmp_path):
     assert "| c | doppler_centroid |" in files[1].read_text()
     with pytest.raises(ValueError, match="class 'c' has 20 measured and 0 synthetic rows"):
         unpaired_gap(real, labels, synth[:40], labels[:40], ["a", "b", "c"])
+
+
+def test_report_names_the_processing_step_that_explains_the_difference(tmp_path):
+    """Measured rows scaled per frame (each column to its own peak), synthetic rows per image: of the steps switched
+    on alone, per-frame scaling explains each class's difference (its class mean equals the measured one); where
+    the synthetic rows already match, no step is named."""
+    import torch
+
+    from handradar.radar.chain import ChainConfig, power_to_unit
+    from handradar.synthesis.measured import DEEP_FLOOR_DB, finish_rows, one_step_rows
+
+    rng = np.random.default_rng(0)
+    labels = np.repeat(np.arange(2), 10)
+    power = 1e-3 + rng.exponential(size=(20, 32, 16)) * 1e-2
+    for i, c in enumerate(labels):
+        power[i, 16 + 4 * (1 + c), :] += np.linspace(0.05, 1.0, 16)  # a line whose level grows over time
+    chain = ChainConfig(dynamic_range_db=40.0)
+    deep = power_to_unit(torch.as_tensor(power), ChainConfig(dynamic_range_db=DEEP_FLOOR_DB)).numpy()
+    per_frame = power_to_unit(torch.as_tensor(power), ChainConfig(dynamic_range_db=40.0, normalise="frame")).numpy()
+    synth = finish_rows(deep, {}, 0, chain)
+    steps = one_step_rows(deep, {}, 0, chain)
+    assert set(steps) == {"linear power", "linear magnitude", "per-frame scaling",
+                          "CA-CFAR (guard 4, training 8, 10 dB)", "threshold 0.2"}
+    report = unpaired_gap(per_frame, labels, synth, labels, ["a", "b"], steps)
+    for name in ("a", "b"):
+        entry = report["classes"][name]
+        assert entry["explained_by"] == "per-frame scaling" and entry["steps"]["per-frame scaling"] < 1e-3
+        assert entry["mean_image_gap"] > 0.05
+    same = unpaired_gap(synth, labels, synth, labels, ["a", "b"], steps)
+    assert same["classes"]["a"]["explained_by"] is None
+    md = write_unpaired_gap(per_frame, labels, synth, labels, ["a", "b"], tmp_path, steps)[1].read_text()
+    assert "| a |" in md and "per-frame scaling" in md

@@ -200,7 +200,7 @@ def test_frame_clutter_removal_takes_each_frames_own_mean():
     DTFT of each frame less its mean (a direct sum), notched at zero Doppler, its peak without clutter removal."""
     loops, frames = 32, 4
     chain = ChainConfig(stft_len=loops, stft_hop=loops, n_columns=frames, clutter_removal="frame")
-    kept, window_mean = (dataclasses.replace(chain, clutter_removal=c) for c in (False, True))
+    kept, window_mean = (dataclasses.replace(chain, clutter_removal=c) for c in ("none", "window"))
     rng = np.random.default_rng(0)
     steps = rng.normal(size=(frames, 1, 1, 1)) + 1j * rng.normal(size=(frames, 1, 1, 1))
     held = torch.as_tensor(np.broadcast_to(steps, (frames, loops, 1, 1)).copy())
@@ -318,10 +318,14 @@ def test_fewer_chirps_widen_the_zero_doppler_line_as_the_window_says():
     assert line(64)[1] == pytest.approx(10 * np.log10((0.23 / 0.54) ** 2), abs=1e-6) and line(64)[0] < -200
 
 
-def test_an_unset_doppler_bins_keeps_earlier_cache_keys():
-    """doppler_bins came after caches keyed by the chain: unset, the chain hashes as before it existed."""
+def test_unset_later_fields_keep_earlier_cache_keys():
+    """doppler_bins and the processing steps came after caches keyed by the chain: unset, the chain hashes as before
+    they existed; set, it does not."""
     from handradar.provenance import config_hash
 
-    before = {k: getattr(ChainConfig(), k) for k in ChainConfig.__dataclass_fields__ if k != "doppler_bins"}
+    later = {k for k, f in ChainConfig.__dataclass_fields__.items() if f.metadata.get("hash_if_set")}
+    assert {"doppler_bins", "doppler_keep", "mti_lag", "range_mode", "scale", "normalise", "cfar"} <= later
+    before = {k: getattr(ChainConfig(), k) for k in ChainConfig.__dataclass_fields__ if k not in later}
     assert config_hash(ChainConfig()) == config_hash(before)
-    assert config_hash(ChainConfig(doppler_bins=128)) != config_hash(ChainConfig())
+    for change in ({"doppler_bins": 128}, {"scale": "linear"}, {"cfar": (2, 4, 10.0)}):
+        assert config_hash(ChainConfig(**change)) != config_hash(ChainConfig())

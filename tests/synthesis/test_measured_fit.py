@@ -12,7 +12,7 @@ import torch
 import yaml
 
 from handradar.data.datasets import load_arrays
-from handradar.data.measured import MeasuredDataset
+from handradar.data.measured import MeasuredDataset, dataset_chain, measured_manifest
 from handradar.radar.chain import ChainConfig, power_to_unit
 from handradar.synthesis.measured import (
     DEEP_FLOOR_DB,
@@ -21,7 +21,6 @@ from handradar.synthesis.measured import (
     fit_unknowns,
     mirror_doppler,
     UnknownsFit,
-    refloor,
     synthesize_measured,
 )
 
@@ -29,48 +28,56 @@ CLASSES = {"push": ["push"], "pull": ["pull"], "swipe": ["swipe_right"]}
 TRUTH = {"v_max_m_s": 2.0, "frame_period_s": 0.04, "chirps_per_frame": 16, "dynamic_range_db": 20.0, "approaching": "low"}
 
 
-def test_refloor_is_the_chain_at_a_shallower_floor():
-    power = torch.rand(4, 16, 8, dtype=torch.float64) ** 8 * 1e3  # several decades of power
-    deep = power_to_unit(power, ChainConfig(dynamic_range_db=60.0)).numpy()
+@pytest.mark.parametrize("steps", [{}, {"scale": "linear"}, {"scale": "linear", "quantity": "magnitude"},
+                                   {"normalise": "frame"}, {"normalise": "frame", "scale": "linear"}])
+def test_finishing_deep_rows_is_the_chain_at_the_dataset_processing(steps):
+    """Rows at the deep floor, finished at a floor D and a scaling, equal the chain run at D and that scaling on
+    the power itself, where the power lies within the deep floor of each row's peak (three decades here)."""
+    power = (1e-3 + torch.rand(4, 16, 8, dtype=torch.float64) ** 2) * 1e3
+    deep = power_to_unit(power, ChainConfig(dynamic_range_db=DEEP_FLOOR_DB)).numpy()
     for floor in (10.0, 25.0, 60.0):
-        direct = power_to_unit(power, ChainConfig(dynamic_range_db=floor)).numpy()
-        np.testing.assert_allclose(refloor(deep, 60.0, floor), direct, atol=1e-6)
-    with pytest.raises(ValueError, match="cannot lower"):
-        refloor(deep, 20.0, 30.0)
+        direct = power_to_unit(power, ChainConfig(dynamic_range_db=floor, **steps)).numpy()
+        finished = finish_rows(deep, {"dynamic_range_db": floor, **steps}, seed=0)
+        np.testing.assert_allclose(finished, direct, atol=1e-6)
 
 
-def measured_stand_in(root: Path, n: int = 8) -> Path:
+def measured_stand_in(root: Path, n: int = 8, truth: dict | None = None, processing: dict | None = None) -> Path:
     """A measured dataset (NPY rows, 32 Doppler x 16 frames, approaching at the *low* rows) whose rows are the
-    simulator's at TRUTH, another seed than the fit's: what the fit must recover."""
+    simulator's at ``truth`` (default TRUTH), another seed than the fit's: what the fit must recover. ``processing``:
+    the manifest's processing section (the truth's own steps where it states them, unknown where the fit must)."""
     manifest = {"format": "handradar.measured/1", "name": "known", "root": ".",
                 "rows": {"layout": "{split}/{class}/*.npy", "splits": {"train": "train", "test": "test"}},
                 "axes": {"doppler": "rows", "approaching": "unknown"}, "values": [0, 1],
-                "radar": {"carrier_hz": 77e9, "clutter_removal": True}, "classes": CLASSES}
+                "radar": {"carrier_hz": 77e9}, "classes": CLASSES, **({"processing": processing} if processing else {})}
     for split in ("train", "test"):
         for c in CLASSES:
             (root / split / c).mkdir(parents=True)
             np.save(root / split / c / "0.npy", np.zeros((32, 16), np.float32))
     (root / "m.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
     template = MeasuredDataset(root / "m.yaml", root / "cache").path()  # the grid and classes the truth needs
-    truth = load_arrays(synthesize_measured(template, TRUTH, per_class=n, seed=99, cache_dir=root / "synth"))
+    truth = load_arrays(synthesize_measured(template, truth or TRUTH, per_class=n, seed=99, cache_dir=root / "synth"))
     for i, (x, y) in enumerate(zip(truth.x, truth.y)):
         np.save(root / "train" / list(CLASSES)[y] / f"{i + 1}.npy", x)
     return MeasuredDataset(root / "m.yaml", root / "cache").path()
+
+
+def simulated_rows(real_path: Path, cache: Path):
+    """The fit's simulate callback on a stand-in: rows as simulated, None where the radar is no candidate."""
+    def simulate(radar: dict):
+        try:
+            d = load_arrays(synthesize_measured(real_path, radar, per_class=8, seed=0, cache_dir=cache, finish=False))
+        except ValueError:
+            return None
+        return d.x, d.y
+
+    return simulate
 
 
 def test_fit_recovers_known_unknowns(tmp_path):
     real_path = measured_stand_in(tmp_path)
     real = load_arrays(real_path)
     rows = np.flatnonzero((real.meta["split"] == "train") & (real.x.max(axis=(1, 2)) > 0))  # the simulated rows
-
-    def simulate(radar: dict):
-        try:
-            d = load_arrays(synthesize_measured(real_path, {**radar, "dynamic_range_db": DEEP_FLOOR_DB},
-                                                per_class=8, seed=0, cache_dir=tmp_path / "synth"))
-        except ValueError:
-            return None
-        return d.x, d.y
-
+    simulate = simulated_rows(real_path, tmp_path / "synth")
     grid = {"v_max_m_s": [0.5, 2.0, 4.0], "frame_period_s": [0.04, 0.08], "chirps_per_frame": [16, 32],
             "dynamic_range_db": [10.0, 20.0, 40.0], "approaching": ["high", "low"]}
     for objective in ("means", "moments"):
@@ -135,12 +142,7 @@ def test_fit_recovers_a_noise_floor(tmp_path):
                                                       "noise_db": None}, per_class=8, seed=99,
                                           cache_dir=tmp_path / "synth"))
     measured_x = finish_rows(sim.x, truth, 5)  # the truth's rows with noise, another noise draw than the fit's
-
-    def simulate(radar: dict):
-        d = load_arrays(synthesize_measured(real_path, {**radar, "dynamic_range_db": DEEP_FLOOR_DB},
-                                            per_class=8, seed=0, cache_dir=tmp_path / "synth"))
-        return d.x, d.y
-
+    simulate = simulated_rows(real_path, tmp_path / "synth")
     grid = {"v_max_m_s": [2.0], "frame_period_s": [0.04], "chirps_per_frame": [16], "dynamic_range_db": [20.0, 40.0],
             "approaching": ["low"], "noise_db": [None, -40.0, -25.0, -10.0], "noise_looks": [1, 8]}
     fit = fit_unknowns(measured_x, sim.y, len(CLASSES), simulate, grid, n_boot=20, seed=0, objective="moments")
@@ -150,6 +152,66 @@ def test_fit_recovers_a_noise_floor(tmp_path):
         fit_unknowns(measured_x, sim.y, len(CLASSES), simulate, grid, objective="medians")
     # without noise, its looks are no separate candidates: 2 floors x (1 noise-free + 3 levels x 2 looks)
     assert len(fit.candidates) == 2 * (1 + 3 * 2)
+
+
+LAB = [{"scale": "linear", "quantity": "magnitude", "normalise": "frame"},
+       {"scale": "db", "normalise": "frame"},
+       {"scale": "linear", "quantity": "power", "normalise": "image"}]
+
+
+@pytest.mark.parametrize("lab", LAB, ids=["linear magnitude per frame", "dB per frame", "linear power per image"])
+def test_fit_recovers_a_labs_scaling(tmp_path, lab):
+    """A stand-in made with a lab's scaling, which its manifest leaves unknown: the fit, label-free (one pooled class),
+    names the scaling used among linear or dB, magnitude or power, per image or per frame."""
+    unknown = {"scale": "unknown", "quantity": "unknown", "normalise": "unknown"}
+    real_path = measured_stand_in(tmp_path, truth={**TRUTH, **lab}, processing=unknown)
+    real = load_arrays(real_path)
+    rows = np.flatnonzero((real.meta["split"] == "train") & (real.x.max(axis=(1, 2)) > 0))
+    simulate = simulated_rows(real_path, tmp_path / "synth")
+    grid = {"v_max_m_s": [2.0], "frame_period_s": [0.04], "chirps_per_frame": [16], "dynamic_range_db": [20.0, 40.0],
+            "approaching": ["low"], "scale": ["db", "linear"], "quantity": ["power", "magnitude"],
+            "normalise": ["image", "frame"]}
+    fit = fit_unknowns(real.x[rows], np.zeros(len(rows), np.int64), 1, lambda r: (lambda m: m and (m[0], 0 * m[1]))(
+        simulate(r)), grid, n_boot=0, seed=0)
+    assert {k: fit.values[k] for k in lab} == lab
+    if lab["scale"] == "db":
+        assert fit.values["dynamic_range_db"] == TRUTH["dynamic_range_db"]
+    # in dB the magnitude's image is the power's: one candidate for both; 2 floors x (1 + 2 linear) x 2 normalisations
+    assert len(fit.candidates) == 2 * 3 * 2
+
+
+def test_a_value_at_the_edge_of_its_grid_is_reported(tmp_path):
+    """The truth's 2 m/s beyond a grid of 0.7-1.5 m/s: the fit chooses the grid's edge and says so, with how to widen
+    it; inside a grid that holds the truth, nothing is reported."""
+    real_path = measured_stand_in(tmp_path)
+    real = load_arrays(real_path)
+    rows = np.flatnonzero((real.meta["split"] == "train") & (real.x.max(axis=(1, 2)) > 0))
+    simulate = simulated_rows(real_path, tmp_path / "synth")
+    base = {"frame_period_s": [0.04], "chirps_per_frame": [16], "dynamic_range_db": [20.0], "approaching": ["low"]}
+    edge = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulate, {**base, "v_max_m_s": [0.7, 1.0, 1.5]},
+                        n_boot=10, seed=0)
+    assert edge.values["v_max_m_s"] == 1.5 and edge.edges == ["v_max_m_s"]
+    assert "v_max_m_s 1.5" in edge.summary() and "AT THE EDGE of its grid" in edge.summary()
+    assert "synth.measured.fit.grid.v_max_m_s=[...]" in edge.summary()
+    assert UnknownsFit.from_dict(edge.as_dict()).edges == ["v_max_m_s"]
+    inside = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulate, {**base, "v_max_m_s": [1.0, 2.0, 4.0]},
+                          n_boot=10, seed=0)
+    assert inside.values["v_max_m_s"] == 2.0 and inside.edges == [] and "EDGE" not in inside.summary()
+
+
+def test_stated_steps_reach_the_synthetic_rows(tmp_path):
+    """A manifest stating an MTI canceller, the central 32 of a 64-bin Doppler FFT, the strongest range bin, a
+    CA-CFAR and a threshold: the synthetic rows keep 32 rows, hold only cells the CFAR passed (many exact zeros)
+    and no value between 0 and the threshold; the dataset's chain says each step."""
+    processing = {"clutter_removal": "mti", "mti_lag": 2, "doppler_fft": 64, "range": "strongest",
+                  "cfar": {"guard": 4, "training": 4, "threshold_db": 3.0}, "threshold": 0.2}
+    real_path = measured_stand_in(tmp_path, processing=processing)
+    chain = dataset_chain(*measured_manifest(real_path))
+    assert (chain.clutter_removal, chain.mti_lag, chain.n_fft, chain.n_doppler, chain.range_mode, chain.cfar,
+            chain.threshold) == ("mti", 2, 64, 32, "strongest", (4, 4, 3.0), 0.2)
+    x = load_arrays(synthesize_measured(real_path, TRUTH, per_class=4, seed=0, cache_dir=tmp_path / "synth")).x
+    assert x.shape[1:] == (32, 16)
+    assert (x == 0).mean() > 0.5 and not ((x > 0) & (x < 0.2)).any() and x.max() == 1.0
 
 
 def test_mirror_doppler_about_the_zero_row():

@@ -38,15 +38,28 @@ from handradar.data.skeletons import motion_classes
 from handradar.errors import FormatError
 from handradar.hand.motions import DEFAULT_RANGES
 from handradar.provenance import config_hash
-from handradar.radar.chain import CLUTTER_REMOVALS, ChainConfig
-from handradar.radar.config import RadarConfig
+from handradar.data.hdf5 import read_attrs
+from handradar.data.unknowns import UNKNOWN, by_section
+from handradar.radar.chain import RANGE_MODES, ChainConfig, ClutterRemoval
 
 log = logging.getLogger(__name__)
 
 FORMAT = "handradar.measured/1"
 SUFFIXES = (".png", ".jpg", ".jpeg", ".npy", ".mat")
-UNKNOWN = "unknown"
-RADAR_FIELDS = ("carrier_hz", "chirps_per_frame", "frame_period_s", "v_max_m_s", "dynamic_range_db")
+RADAR_FIELDS = ("carrier_hz", *by_section("radar"))
+PROCESSING = {  # processing.<key>: the default where a manifest leaves it out (docs/datasets.md#processing)
+    "clutter_removal": "window",  # ClutterRemoval
+    "mti_lag": 1,                 # loops, for clutter_removal mti
+    "doppler_fft": None,          # the Doppler FFT's bins where the image keeps its central rows (None: its rows)
+    "range": "sum",               # RANGE_MODES: how the range bins of range_gate_m become one image
+    "range_gate_m": [0.08, 0.70],
+    "quantity": "power",          # unknown: fitted (handradar.data.unknowns)
+    "scale": "db",
+    "normalise": "image",
+    "reference_db": 0.0,          # normalise none: the power shown as 1, dB
+    "cfar": None,                 # {guard: cells, training: cells, threshold_db: dB} along each column
+    "threshold": None,            # pixels below this [0, 1] value set to 0
+}
 
 
 @dataclass
@@ -68,7 +81,7 @@ class Manifest:
     grid: tuple[int, int] | None                  # None: keep the images' own grid
     values: tuple[float, float] | None            # value range mapped to [0, 1]; None: each image's min..max
     radar: dict[str, float | str]                 # RADAR_FIELDS, numbers or "unknown"
-    clutter_removal: bool | str                   # the dataset's chain subtracted the static clutter (or "frame")
+    processing: dict[str, Any]                    # PROCESSING: how the dataset's code made its images
     motion_ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
     citation: str = ""
     test_fraction: float | None = None            # the split rule when the layout has no {split}
@@ -83,7 +96,7 @@ class Manifest:
                    doppler_axis=0 if axes["doppler"] == "rows" else 1, approaching=axes["approaching"],
                    zero_doppler=axes["zero_doppler"], grid=None if d["grid"] == "keep" else tuple(d["grid"]),
                    values=None if d["values"] == "per_image" else tuple(d["values"]), radar=d["radar"],
-                   clutter_removal=d["clutter_removal"],
+                   processing={**PROCESSING, **d["processing"]},
                    motion_ranges={k: tuple(v) for k, v in d["motion_ranges"].items()}, citation=d["citation"],
                    test_fraction=d["test_fraction"], split_seed=d["split_seed"])
 
@@ -94,7 +107,7 @@ class Manifest:
                          "zero_doppler": self.zero_doppler},
                 "grid": "keep" if self.grid is None else list(self.grid),
                 "values": "per_image" if self.values is None else list(self.values),
-                "radar": self.radar, "clutter_removal": self.clutter_removal,
+                "radar": self.radar, "processing": self.processing,
                 "motion_ranges": {k: list(v) for k, v in self.motion_ranges.items()}, "citation": self.citation,
                 "test_fraction": self.test_fraction, "split_seed": self.split_seed}
 
@@ -186,18 +199,20 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
     if values != "per_image" and not (isinstance(values, list) and len(values) == 2 and values[1] > values[0]):
         raise FormatError(path, f"'values' must be per_image or [low, high], found {values!r}")
     radar_raw = d.get("radar") or {}
-    radar = {}
+    if "clutter_removal" in radar_raw:
+        raise FormatError(path, "'radar.clutter_removal' is now 'processing.clutter_removal' (none, window, frame or mti)")
+    extra = sorted(set(radar_raw) - set(RADAR_FIELDS) - {"name"})
+    if extra:
+        raise FormatError(path, f"unknown radar field 'radar.{extra[0]}'; expected {list(RADAR_FIELDS)}")
+    radar, unknowns = {}, by_section("radar")
     for k in RADAR_FIELDS:
         v = radar_raw.get(k, UNKNOWN)
-        if v != UNKNOWN and (not isinstance(v, (int, float)) or not v > 0):
-            raise FormatError(path, f"'radar.{k}' must be a positive number or unknown, found {v!r}")
+        problem = None if v == UNKNOWN else unknowns[k].check(v) if k in unknowns else \
+            (None if isinstance(v, (int, float)) and v > 0 else "must be a positive number or unknown")
+        if problem:
+            raise FormatError(path, f"'radar.{k}' {problem}, found {v!r}")
         radar[k] = v if v == UNKNOWN else float(v)
-    extra = sorted(set(radar_raw) - set(RADAR_FIELDS) - {"clutter_removal", "name"})
-    if extra:
-        raise FormatError(path, f"unknown radar field 'radar.{extra[0]}'; expected {list(RADAR_FIELDS)}, clutter_removal")
-    clutter = radar_raw.get("clutter_removal", True)
-    if type(clutter) not in (bool, str) or clutter not in CLUTTER_REMOVALS:  # a bare 0 or 1 is no answer
-        raise FormatError(path, f"'radar.clutter_removal' must be true, false or frame, found {clutter!r}")
+    processing = read_processing(path, d.get("processing") or {})
     ranges = {}
     for k, v in (d.get("motion_ranges") or {}).items():
         if k not in DEFAULT_RANGES or not (isinstance(v, list) and len(v) == 2 and v[0] <= v[1]):
@@ -209,9 +224,50 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
                     zero_doppler=None if zero is None else float(zero),
                     grid=None if grid == "keep" else (int(grid[0]), int(grid[1])),
                     values=None if values == "per_image" else (float(values[0]), float(values[1])),
-                    radar=radar, clutter_removal=clutter, motion_ranges=ranges,
+                    radar=radar, processing=processing, motion_ranges=ranges,
                     citation=str(d.get("citation", "")), test_fraction=test_fraction,
                     split_seed=int(rows.get("seed", 0)))
+
+
+def read_processing(path: Path, raw: Any) -> dict[str, Any]:
+    """The manifest's ``processing`` section checked, every key of :data:`PROCESSING` filled in."""
+    if not isinstance(raw, dict):
+        raise FormatError(path, "'processing' must be a mapping of the steps the dataset's code took")
+    extra = sorted(set(raw) - set(PROCESSING))
+    if extra:
+        raise FormatError(path, f"unknown processing step 'processing.{extra[0]}'; expected {list(PROCESSING)}")
+    p = {**PROCESSING, **raw}
+    fitted = by_section("processing")
+
+    def bad(key: str, what: str) -> FormatError:
+        return FormatError(path, f"'processing.{key}' must be {what}, found {p[key]!r:.60}")
+
+    for key, u in fitted.items():
+        if p[key] != UNKNOWN and u.check(p[key]):
+            raise bad(key, f"one of {list(u.choices)} or unknown")
+    if p["clutter_removal"] not in [c.value for c in ClutterRemoval]:
+        raise bad("clutter_removal", f"one of {[c.value for c in ClutterRemoval]}")
+    if type(p["mti_lag"]) is not int or p["mti_lag"] < 1:
+        raise bad("mti_lag", "a whole number of loops >= 1")
+    if p["doppler_fft"] is not None and (type(p["doppler_fft"]) is not int or p["doppler_fft"] < 2):
+        raise bad("doppler_fft", "the Doppler FFT's bins (a whole number) or null")
+    if p["range"] not in RANGE_MODES:
+        raise bad("range", f"one of {list(RANGE_MODES)}")
+    gate = p["range_gate_m"]
+    if not (isinstance(gate, list) and len(gate) == 2 and all(isinstance(g, (int, float)) for g in gate)
+            and 0 <= gate[0] < gate[1]):
+        raise bad("range_gate_m", "[near, far] in metres")
+    if not isinstance(p["reference_db"], (int, float)):
+        raise bad("reference_db", "a number of dB")
+    cfar = p["cfar"]
+    if cfar is not None:
+        if not (isinstance(cfar, dict) and set(cfar) == {"guard", "training", "threshold_db"}
+                and type(cfar["guard"]) is int and type(cfar["training"]) is int
+                and isinstance(cfar["threshold_db"], (int, float))):
+            raise bad("cfar", "{guard: cells, training: cells, threshold_db: dB} or null")
+    if p["threshold"] is not None and not (isinstance(p["threshold"], (int, float)) and 0 <= p["threshold"] < 1):
+        raise bad("threshold", "a value in [0, 1) or null")
+    return p
 
 
 def list_rows(m: Manifest) -> list[tuple[str, int, Path]]:
@@ -331,14 +387,43 @@ def resample(a: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return out[0, 0].clamp(0, 1).numpy()
 
 
-def dataset_chain(m: Manifest, shape: tuple[int, int], chirps: int | None = None) -> ChainConfig:
-    """The chain that reproduces the dataset's processing: frame-based Doppler (one column per frame: the
-    frame's ``chirps`` loops, default ``doppler``, zero-padded to the ``doppler`` bins of ``shape``), its clutter
-    removal and dynamic range (30 dB while unknown)."""
-    dr = m.radar["dynamic_range_db"]
-    n = int(chirps or shape[0])
-    return ChainConfig(stft_len=n, stft_hop=n, doppler_bins=shape[0], n_columns=shape[1],
-                       clutter_removal=m.clutter_removal, dynamic_range_db=30.0 if dr == UNKNOWN else float(dr))
+def dataset_chain(m: Manifest, shape: tuple[int, int], chirps: int | None = None,
+                  values: Mapping[str, Any] | None = None) -> ChainConfig:
+    """The chain that reproduces the dataset's processing (``m.processing``): frame-based Doppler (one column per
+    frame: the frame's ``chirps`` loops, default the FFT's bins, zero-padded to the Doppler FFT of ``doppler_fft``
+    bins, or of ``shape[0]``, of which the central ``shape[0]`` rows are kept), its clutter filter, range handling,
+    scaling and thresholds; ``values`` gives what the manifest leaves unknown (the dB floor: 30 dB while unknown)."""
+    p, values = m.processing, dict(values or {})
+    fft = int(p["doppler_fft"] or shape[0])
+    if fft < shape[0]:
+        raise FormatError(m.path, f"'processing.doppler_fft' {fft} is fewer than the images' {shape[0]} Doppler rows")
+
+    def stated(key: str, default: Any) -> Any:  # the manifest's value, else the fitted one; its default unset (None)
+        v = p[key] if p[key] != UNKNOWN else values.get(key)
+        return None if v is None or v == default else v
+
+    dr = m.radar["dynamic_range_db"] if m.radar["dynamic_range_db"] != UNKNOWN else values.get("dynamic_range_db")
+    cfar = p["cfar"]
+    n = int(chirps or fft)
+    return ChainConfig(stft_len=n, stft_hop=n, doppler_bins=fft, n_columns=shape[1],
+                       doppler_keep=shape[0] if fft != shape[0] else None, gate_m=tuple(p["range_gate_m"]),
+                       clutter_removal=p["clutter_removal"],
+                       mti_lag=p["mti_lag"] if p["clutter_removal"] == "mti" else None,
+                       range_mode=stated("range", "sum"), quantity=stated("quantity", "power"),
+                       scale=stated("scale", "db"), normalise=stated("normalise", "image"),
+                       reference_db=float(p["reference_db"]) if p["normalise"] == "none" else None,
+                       cfar=None if cfar is None else (cfar["guard"], cfar["training"], float(cfar["threshold_db"])),
+                       threshold=None if p["threshold"] is None else float(p["threshold"]),
+                       dynamic_range_db=30.0 if dr is None else float(dr))
+
+
+def measured_manifest(path: str | Path) -> tuple[Manifest, tuple[int, int]]:
+    """The manifest a measured dataset file (:class:`MeasuredDataset`) was built from, and its (doppler, columns) grid."""
+    attrs = read_attrs(path)
+    if attrs.get("skeletons") != "none" or "manifest" not in attrs:
+        raise FormatError(path, "not a measured dataset (data=measured data.manifest=FILE builds one)")
+    return Manifest.from_dict(json.loads(attrs["manifest"]), Path(path)), (attrs["chain"].n_doppler,
+                                                                           attrs["chain"].n_columns)
 
 
 class MeasuredDataset:
@@ -385,33 +470,3 @@ def write_measured(m: Manifest, rows: Sequence[tuple[str, int, Path]], out: Path
                      {"split": split, "gesture": list(m.classes)[label], "recording": f.relative_to(m.root).as_posix()})
     log.info("%s: %d rows of %d x %d, %d classes -> %s", m.name, len(rows), *shape, len(m.classes), out.name)
     return out
-
-
-def synthesis_radar(m: Manifest, shape: tuple[int, int], values: Mapping[str, float]) -> RadarConfig:
-    """A radar whose frame-based Doppler map has the dataset's grid: ``chirps_per_frame`` chirp loops a frame
-    (default ``shape[0]``, at most that: the chain zero-pads them to the ``shape[0]`` Doppler bins), a loop period
-    giving ``v_max_m_s`` (v_max = lambda / (4 T_loop)), ``frame_period_s`` a column.
-
-    ``values`` gives the manifest's unknowns (fitted); the fast-time set-up (which only places the
-    hand in range bins, summed over by the chain) is the AWR1843 default's. One TX, one RX."""
-    known = {k: v for k, v in m.radar.items() if v != UNKNOWN}
-    r = {**known, **{k: float(v) for k, v in values.items() if k in RADAR_FIELDS and v is not None}}
-    missing = [k for k in ("carrier_hz", "v_max_m_s", "frame_period_s") if k not in r]
-    if missing:
-        raise ValueError(f"{m.path}: radar.{missing[0]} is unknown and not fitted")
-    base = RadarConfig(start_freq_hz=r["carrier_hz"], idle_time_s=100e-6, adc_start_time_s=6e-6,
-                       ramp_end_time_s=51.2e-6, slope_hz_per_s=76.22e12, n_samples=256, sample_rate_hz=10e6)
-    loop_s = base.wavelength_m / (4.0 * r["v_max_m_s"])  # carrier_hz is the sweep start, as TI states it
-    if loop_s <= base.ramp_end_time_s + 1e-6:
-        raise ValueError(f"v_max {r['v_max_m_s']:g} m/s needs chirps of {loop_s * 1e6:.1f} us, shorter than the ramp")
-    n_loops = int(r.get("chirps_per_frame", shape[0]))
-    if not 2 <= n_loops <= shape[0]:
-        raise ValueError(f"{m.path}: {n_loops} chirps a frame: expected 2 to the {shape[0]} Doppler bins of its grid")
-    frame_s = float(r["frame_period_s"])
-    if frame_s < n_loops * loop_s:
-        raise ValueError(f"{n_loops} chirp loops of {loop_s * 1e3:.3f} ms (v_max {r['v_max_m_s']:g} m/s) do not fit in a "
-                         f"{frame_s * 1e3:g} ms frame")
-    return RadarConfig(start_freq_hz=base.start_freq_hz, idle_time_s=loop_s - base.ramp_end_time_s,
-                       adc_start_time_s=base.adc_start_time_s, ramp_end_time_s=base.ramp_end_time_s,
-                       slope_hz_per_s=base.slope_hz_per_s, n_samples=base.n_samples, sample_rate_hz=base.sample_rate_hz,
-                       n_loops=n_loops, frame_period_s=frame_s, source=f"{m.name} (synthesis radar)")

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 import scipy.signal
@@ -44,24 +45,60 @@ COSINE_WINDOWS: dict[str, tuple[float, ...]] = {
 }
 
 
-CLUTTER_REMOVALS = (True, False, "frame")  # ChainConfig.clutter_removal
+class ClutterRemoval(StrEnum):
+    """What the chain subtracts from each range bin's slow-time signal before the Doppler transform."""
+
+    NONE = "none"      # nothing
+    WINDOW = "window"  # the mean over the window (all its frames and loops)
+    FRAME = "frame"    # each frame's own mean over its loops (the TI mmWave SDK's static clutter removal)
+    MTI = "mti"        # a two-pulse canceller inside each STFT window (a frame, frame-based): loop m minus loop m - lag
+
+    @classmethod
+    def parse(cls, value: object) -> ClutterRemoval:
+        """A name, or the bool of earlier configs (true: window, false: none); anything else is an error."""
+        if isinstance(value, bool):
+            return cls.WINDOW if value else cls.NONE
+        if isinstance(value, str) and value in cls._value2member_map_:
+            return cls(value)
+        raise ValueError(f"clutter_removal must be one of {[c.value for c in cls]}, found {value!r}")
+
+    def __canonical__(self) -> bool | str:
+        """The value cache keys hash: the bools earlier caches were keyed by, so that they hold."""
+        return {ClutterRemoval.WINDOW: True, ClutterRemoval.NONE: False}.get(self, self.value)
+
+
+QUANTITIES = ("power", "magnitude")    # ChainConfig.quantity: what a pixel holds before scaling
+SCALES = ("db", "linear")              # ChainConfig.scale
+NORMALISATIONS = ("image", "frame", "none")  # ChainConfig.normalise: the reference a pixel is scaled to
+RANGE_MODES = ("sum", "strongest")     # ChainConfig.range_mode: how the gated range bins become one Doppler image
+
+
+def _set(**kw):  # a field added after caches keyed by the chain: unset (None), earlier cache keys hold
+    return field(metadata={"hash_if_set": True}, **kw)
 
 
 @dataclass(frozen=True)
 class ChainConfig:
     """Settings of the processing chain (the same for measured and simulated data).
 
-    gate_m: range interval (metres) of the bins kept; the hand is expected inside it.
+    gate_m: range interval (metres) of the bins kept; the hand is expected inside it (one fixed range bin of a
+    dataset: a gate that holds one bin).
     stft_len / stft_hop: slow-time STFT window length and hop, in chirp loops; windows never
     straddle two frames (frames are separated by idle time).
-    doppler_bins: the Doppler FFT's length, the window zero-padded to it (None: ``stft_len``, no padding);
-    the spectrogram has this many rows (:attr:`n_doppler`).
+    doppler_bins: the Doppler FFT's length, the window zero-padded to it (None: ``stft_len``, no padding).
+    doppler_keep: rows kept, the central ``doppler_keep`` of the FFT's bins (None: all); the spectrogram has
+    :attr:`n_doppler` rows, zero Doppler at row ``n_doppler // 2``.
     n_columns: spectrogram width; it must be a whole number of frames' worth of columns.
-    dynamic_range_db: values more than this below the spectrogram's peak are clamped to 0.
-    clutter_removal: True subtracts each range bin's slow-time mean over the window (all its frames and
-    loops); ``"frame"`` over each frame's loops alone, as the TI mmWave SDK's static clutter removal does
-    (a still reflector goes even if it moved between frames; a slowly moving one leaves the rows beside
-    zero Doppler, with zero itself notched); False: none.
+    clutter_removal: :class:`ClutterRemoval` (a name; true / false: window / none); ``mti_lag``: the canceller's
+    lag in loops (None: 1).
+    range_mode: ``sum`` (None): power summed over the gated bins; ``strongest``: each frame's strongest gated bin
+    (power over its loops and channels, after clutter removal) alone.
+    quantity / scale / normalise (None: power, db, image): a pixel is the power or the magnitude, scaled to the
+    reference of its image (the peak), of its column (each frame's column to its own peak) or none (``reference_db``:
+    the power, in dB, shown as 1); in dB with a floor ``dynamic_range_db`` below the reference, or linear.
+    cfar: (guard, training, threshold dB) of a cell-averaging CFAR along each column's Doppler cells (cyclic): a cell
+    whose power is below the threshold times its training cells' mean is set to 0. threshold: pixels below it
+    (a [0, 1] value) set to 0. None: no such step.
     """
 
     range_window: str = "hann"
@@ -69,14 +106,22 @@ class ChainConfig:
     stft_window: str = "hamming"
     stft_len: int = 64
     stft_hop: int = 64
-    doppler_bins: int | None = field(default=None, metadata={"hash_if_set": True})  # unset: earlier cache keys hold
+    doppler_bins: int | None = _set(default=None)
     n_columns: int = 32
     dynamic_range_db: float = 30.0
-    clutter_removal: bool | str = True
+    clutter_removal: ClutterRemoval | bool | str = ClutterRemoval.WINDOW
+    mti_lag: int | None = _set(default=None)
+    doppler_keep: int | None = _set(default=None)
+    range_mode: str | None = _set(default=None)
+    quantity: str | None = _set(default=None)
+    scale: str | None = _set(default=None)
+    normalise: str | None = _set(default=None)
+    reference_db: float | None = _set(default=None)
+    cfar: tuple[int, int, float] | None = _set(default=None)
+    threshold: float | None = _set(default=None)
 
     def __post_init__(self) -> None:
-        if self.clutter_removal not in CLUTTER_REMOVALS:
-            raise ValueError(f"clutter_removal must be true, false or 'frame', found {self.clutter_removal!r}")
+        object.__setattr__(self, "clutter_removal", ClutterRemoval.parse(self.clutter_removal))
         object.__setattr__(self, "gate_m", (float(self.gate_m[0]), float(self.gate_m[1])))
         for name in (self.range_window, self.stft_window):
             if name not in COSINE_WINDOWS:
@@ -87,11 +132,32 @@ class ChainConfig:
             raise ValueError("stft_len, stft_hop, n_columns and dynamic_range_db must be positive")
         if self.doppler_bins is not None and int(self.doppler_bins) < self.stft_len:
             raise ValueError(f"doppler_bins {self.doppler_bins} is fewer than the STFT length {self.stft_len}")
+        if self.doppler_keep is not None and not 2 <= int(self.doppler_keep) <= self.n_fft:
+            raise ValueError(f"doppler_keep {self.doppler_keep} must lie in 2..{self.n_fft} (the Doppler FFT's bins)")
+        if self.mti_lag is not None and not 1 <= int(self.mti_lag) < self.stft_len:
+            raise ValueError(f"mti_lag {self.mti_lag} must lie in 1..{self.stft_len - 1} loops")
+        for key, choices in (("range_mode", RANGE_MODES), ("quantity", QUANTITIES), ("scale", SCALES),
+                             ("normalise", NORMALISATIONS)):
+            if getattr(self, key) is not None and getattr(self, key) not in choices:
+                raise ValueError(f"{key} must be one of {list(choices)}, found {getattr(self, key)!r}")
+        if self.cfar is not None:
+            guard, train, db = self.cfar
+            if not (int(guard) >= 0 and int(train) >= 1 and 2 * (int(guard) + int(train)) < self.n_doppler):
+                raise ValueError(f"cfar (guard {guard}, training {train}) needs guard >= 0, training >= 1 and "
+                                 f"2 (guard + training) < {self.n_doppler} Doppler rows")
+            object.__setattr__(self, "cfar", (int(guard), int(train), float(db)))
+        if self.threshold is not None and not 0.0 <= float(self.threshold) < 1.0:
+            raise ValueError(f"threshold must lie in [0, 1), found {self.threshold}")
+
+    @property
+    def n_fft(self) -> int:
+        """The Doppler FFT's length."""
+        return self.stft_len if self.doppler_bins is None else int(self.doppler_bins)
 
     @property
     def n_doppler(self) -> int:
-        """Rows of a spectrogram: the Doppler FFT's length."""
-        return self.stft_len if self.doppler_bins is None else int(self.doppler_bins)
+        """Rows of a spectrogram: the Doppler FFT's bins kept."""
+        return self.n_fft if self.doppler_keep is None else int(self.doppler_keep)
 
     def columns_per_frame(self, radar: RadarConfig) -> int:
         if radar.n_loops < self.stft_len:
@@ -262,21 +328,39 @@ def remove_static_clutter(profiles: torch.Tensor, per_frame: bool = False) -> to
     return profiles - profiles.mean(dim=(-3,) if per_frame else (-4, -3), keepdim=True)
 
 
+def mti_cancel(segments: torch.Tensor, lag: int = 1) -> torch.Tensor:
+    """A two-pulse canceller along the loops (axis -3) of STFT windows (..., loops, channels, bins): loop m becomes
+    loop m minus loop m - ``lag``; the first ``lag`` loops, which have no predecessor in the window, become 0 (the
+    window keeps its length and its loops their times). Its power response is 4 sin^2(pi f lag), f in cycles a loop."""
+    out = torch.zeros_like(segments)
+    out[..., lag:, :, :] = segments[..., lag:, :, :] - segments[..., :-lag, :, :]
+    return out
+
+
 def clutter_removed(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
-    """``profiles`` (..., frames, loops, channels, bins) after the chain's clutter removal
-    (ChainConfig.clutter_removal)."""
-    if not chain.clutter_removal:
+    """``profiles`` (..., frames, loops, channels, bins) after the chain's mean removal (ClutterRemoval window or
+    frame); the MTI canceller runs inside each STFT window instead (:func:`stft_power`)."""
+    c = chain.clutter_removal
+    if c in (ClutterRemoval.NONE, ClutterRemoval.MTI):
         return profiles
-    return remove_static_clutter(profiles, per_frame=chain.clutter_removal == "frame")
+    return remove_static_clutter(profiles, per_frame=c == ClutterRemoval.FRAME)
+
+
+def kept_rows(chain: ChainConfig) -> slice:
+    """The rows of the fftshifted Doppler FFT the spectrogram keeps: the central ``n_doppler`` of ``n_fft``, zero
+    Doppler (row ``n_fft // 2``) landing on row ``n_doppler // 2``."""
+    first = chain.n_fft // 2 - chain.n_doppler // 2
+    return slice(first, first + chain.n_doppler)
 
 
 def stft_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
-    """STFT over slow time inside each frame, power summed over channels and gated bins.
+    """STFT over slow time inside each frame (the MTI canceller, if set, inside each window), power summed over
+    channels and collapsed over the gated bins (``range_mode``).
 
     profiles (..., frames, loops, channels, bins) -> power (..., doppler = n_doppler, columns),
     columns in time order (``columns_per_frame`` per frame), zero Doppler at row n_doppler // 2,
     approaching reflectors above it (module doc, sign convention). The window is zero-padded to
-    ``n_doppler`` (``doppler_bins``).
+    ``n_fft`` (``doppler_bins``), of whose rows the central ``n_doppler`` are kept (``doppler_keep``).
     """
     frames, loops = profiles.shape[-4:-2]
     n_win = (loops - chain.stft_len) // chain.stft_hop + 1
@@ -285,10 +369,20 @@ def stft_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
     starts = torch.arange(n_win, device=profiles.device) * chain.stft_hop
     idx = starts[:, None] + torch.arange(chain.stft_len, device=profiles.device)[None, :]
     segs = profiles[..., idx, :, :]  # (..., frames, n_win, len, ch, bins)
+    if chain.clutter_removal == ClutterRemoval.MTI:  # inside each window: every column sees the same canceller
+        segs = mti_cancel(segs, chain.mti_lag or 1)
     w = window(chain.stft_window, chain.stft_len, dtype=profiles.real.dtype, device=profiles.device)
     # the exp(+j) kernel (unscaled inverse DFT): rows ordered by the echo's Doppler shift, approaching above
-    spec = torch.fft.fftshift(torch.fft.ifft(segs * w[:, None, None], n=chain.n_doppler, dim=-3, norm="forward"), dim=-3)
-    power = (spec.real**2 + spec.imag**2).sum(dim=(-2, -1))  # (..., frames, n_win, doppler)
+    spec = torch.fft.fftshift(torch.fft.ifft(segs * w[:, None, None], n=chain.n_fft, dim=-3, norm="forward"), dim=-3)
+    if chain.doppler_keep is not None:
+        spec = spec[..., kept_rows(chain), :, :]
+    cells = (spec.real**2 + spec.imag**2).sum(dim=-2)  # (..., frames, n_win, doppler, bins)
+    if chain.range_mode == "strongest":  # each frame's bin of most power (its windows, rows and channels)
+        best = cells.sum(dim=(-3, -2)).argmax(dim=-1)  # (..., frames)
+        index = best[..., None, None, None].expand(*cells.shape[:-1], 1)
+        power = cells.gather(-1, index)[..., 0]
+    else:
+        power = cells.sum(dim=-1)  # (..., frames, n_win, doppler)
     power = power.flatten(-3, -2)  # (..., columns, doppler)
     return power.transpose(-1, -2)
 
@@ -310,14 +404,49 @@ def select_window_start(power: torch.Tensor, chain: ChainConfig, columns_per_fra
 
 
 def power_to_unit(power: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
-    """Power -> dB -> clamp at ``dynamic_range_db`` below each spectrogram's peak -> [0, 1].
+    """Power (..., doppler, columns) -> the spectrogram in [0, 1] (ChainConfig's quantity, normalise, scale, cfar,
+    threshold; by default: dB, clamped ``dynamic_range_db`` below each spectrogram's peak).
 
-    The peak is taken over the last two dims (doppler, columns) of each spectrogram.
-    """
-    peak = power.detach().amax(dim=(-2, -1), keepdim=True)
-    db = 10.0 * torch.log10(power + 1e-12 * peak + 1e-30)
-    top = db.amax(dim=(-2, -1), keepdim=True)
-    return ((db - top + chain.dynamic_range_db) / chain.dynamic_range_db).clamp(0.0, 1.0)
+    The reference is the peak over the last two dims (``image``), over each column (``frame``), or the power
+    10^(reference_db / 10) (``none``). The CFAR decides on the power; the fixed threshold on the [0, 1] value."""
+    if (chain.quantity, chain.scale, chain.normalise) == (None, None, None):  # the default, as every cache holds it
+        peak = power.detach().amax(dim=(-2, -1), keepdim=True)
+        db = 10.0 * torch.log10(power + 1e-12 * peak + 1e-30)
+        top = db.amax(dim=(-2, -1), keepdim=True)
+        unit = ((db - top + chain.dynamic_range_db) / chain.dynamic_range_db).clamp(0.0, 1.0)
+    else:
+        unit = scaled_to_unit(power, chain)
+    if chain.cfar is not None:
+        unit = torch.where(cfar_detections(power, *chain.cfar), unit, torch.zeros_like(unit))
+    if chain.threshold is not None:
+        unit = torch.where(unit >= chain.threshold, unit, torch.zeros_like(unit))
+    return unit
+
+
+def scaled_to_unit(power: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
+    """Power -> [0, 1] by ``quantity``, ``normalise`` and ``scale`` (:func:`power_to_unit`)."""
+    normalise = chain.normalise or "image"
+    if normalise == "image":
+        ref = power.detach().amax(dim=(-2, -1), keepdim=True)
+    elif normalise == "frame":
+        ref = power.detach().amax(dim=-2, keepdim=True)
+    else:
+        ref = torch.full_like(power[..., :1, :1], 10.0 ** ((chain.reference_db or 0.0) / 10.0))
+    relative = power / ref.clamp_min(1e-30)  # power relative to the reference
+    if (chain.scale or "db") == "db":  # a magnitude's dB, 20 log10 |x|, is its power's
+        db = 10.0 * torch.log10(relative + 1e-30)
+        return ((db + chain.dynamic_range_db) / chain.dynamic_range_db).clamp(0.0, 1.0)
+    return (relative.sqrt() if chain.quantity == "magnitude" else relative).clamp(0.0, 1.0)
+
+
+def cfar_detections(power: torch.Tensor, guard: int, train: int, threshold_db: float) -> torch.Tensor:
+    """Cell-averaging CFAR along the Doppler axis (-2) of ``power`` (..., doppler, columns), cyclic (the axis is an
+    FFT's): True where a cell's power exceeds 10^(threshold_db / 10) times the mean of its 2 ``train`` training
+    cells, the ``guard`` cells on either side of it left out."""
+    noise = torch.zeros_like(power)
+    for k in range(guard + 1, guard + train + 1):
+        noise = noise + torch.roll(power, k, dims=-2) + torch.roll(power, -k, dims=-2)
+    return power > 10.0 ** (threshold_db / 10.0) * noise / (2 * train)
 
 
 def profile_power(profiles: torch.Tensor, chain: ChainConfig) -> torch.Tensor:
@@ -332,15 +461,30 @@ def white_noise_power(variance: torch.Tensor, chain: ChainConfig, n_frames: int,
 
     ``variance`` (any shape ...): E|n|^2 of each per-range-bin value, independent across chirps
     and channels (receiver noise after the range FFT: correlation across bins does not change the
-    summed power). Clutter removal subtracts the mean of N values (frames x loops; a frame's loops
-    for ``"frame"``), leaving covariance variance (delta - 1 / N); a windowed DFT bin d then holds
-    variance (sum w^2 - |W(d)|^2 / N), W the window's DFT: the mean removal notches the
-    rows near zero Doppler only. Summed over ``n_channels`` channels and ``n_bins`` bins."""
-    n_mean = n_loops if chain.clutter_removal == "frame" else n_frames * n_loops
+    summed power). A windowed DFT bin d of the clutter-removed loops holds variance ||a_d||^2, a_d the
+    coefficients that bin gives each input loop: for a mean removal over N values (frames x loops; a frame's
+    loops for ``frame``) that is sum w^2 - |W(d)|^2 / N, W the window's DFT, notching the rows near zero
+    Doppler only; for the MTI canceller, the window's taps less their shifted copies. Summed over
+    ``n_channels`` channels and ``n_bins`` bins (one bin for ``range_mode`` strongest: the chosen bin's
+    expectation, the choice's bias left out)."""
+    c = chain.clutter_removal
     w = window(chain.stft_window, chain.stft_len, dtype=torch.float64)
-    per_row = torch.full((chain.n_doppler,), float((w**2).sum()), dtype=torch.float64)
-    if chain.clutter_removal:
-        per_row = per_row - torch.fft.fftshift(torch.fft.fft(w, n=chain.n_doppler).abs() ** 2) / n_mean
+    if c == ClutterRemoval.MTI:  # y_m = x_m - x_{m-lag} for m >= lag, 0 below: a_d[k] = w_k e_k [k>=lag] - w_{k+lag} e_{k+lag}
+        lag = chain.mti_lag or 1
+        k = torch.arange(chain.stft_len, dtype=torch.float64)
+        d = torch.arange(chain.n_fft, dtype=torch.float64) - chain.n_fft // 2
+        e = torch.polar(torch.ones(len(d), len(k), dtype=torch.float64), 2 * math.pi * d[:, None] * k[None, :] / chain.n_fft)
+        a = torch.where(k >= lag, w, torch.zeros_like(w)) * e
+        a[:, :-lag] -= (w[lag:] * e[:, lag:])
+        per_row = (a.abs() ** 2).sum(dim=1)
+    else:
+        n_mean = n_loops if c == ClutterRemoval.FRAME else n_frames * n_loops
+        per_row = torch.full((chain.n_fft,), float((w**2).sum()), dtype=torch.float64)
+        if c != ClutterRemoval.NONE:
+            per_row = per_row - torch.fft.fftshift(torch.fft.fft(w, n=chain.n_fft).abs() ** 2) / n_mean
+    per_row = per_row[kept_rows(chain)]
+    if chain.range_mode == "strongest":
+        n_bins = 1
     variance = torch.as_tensor(variance)
     if not variance.is_floating_point():
         variance = variance.to(torch.float64)
@@ -385,7 +529,7 @@ def capture_spectrogram(profiles: torch.Tensor, radar: RadarConfig, chain: Chain
 def doppler_axis_hz(radar: RadarConfig, chain: ChainConfig) -> np.ndarray:
     """Echo Doppler shift 2 v / lambda of each spectrogram row, positive approaching (row n_doppler // 2 is zero)."""
     k = np.arange(chain.n_doppler) - chain.n_doppler // 2
-    return k / (chain.n_doppler * radar.loop_period_s)
+    return k / (chain.n_fft * radar.loop_period_s)
 
 
 def velocity_axis_m_s(radar: RadarConfig, chain: ChainConfig) -> np.ndarray:

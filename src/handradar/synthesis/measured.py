@@ -2,27 +2,26 @@
 
 Synthesis (:func:`synthesize_measured`): the dataset's classes become skeletons through their
 motions (the ``motions`` source, handradar.hand.motions), simulated by the paper's model with a
-radar whose frame-based Doppler map has the dataset's grid (handradar.data.measured.synthesis_radar).
+radar whose frame-based Doppler map has the dataset's grid (:func:`synthesis_radar`) and the dataset's
+clutter filter, Doppler FFT and range handling, in dB at a deep floor; then finished (:func:`finish_rows`)
+by the rest of its processing.
 
 The fit (:func:`fit_unknowns`, docs/datasets.md#measured-radar-datasets): no measured row has a
-skeleton, so nothing is paired. For every candidate of the unknowns the synthetic rows' class-mean
-images (objective ``means``), or class-mean and class-spread images (per-pixel standard deviation,
-``moments``), are compared with the measured rows': 1 - SSIM averaged over the images (torchmetrics
+skeleton, so nothing is paired. For every candidate of the unknowns (handradar.data.unknowns) the synthetic
+rows' class-mean images (objective ``means``), or class-mean and class-spread images (per-pixel standard
+deviation, ``moments``), are compared with the measured rows': 1 - SSIM averaged over the images (torchmetrics
 SSIM, ``data_range=1.0``). The spread is what tells a noise floor's texture (its looks) apart from its
-level. Two unknowns cost
-no new simulation and are exact:
-
-- the dB floor: rows synthesised with a deep floor D0 are re-floored at any D <= D0 by
-  ``clip((x D0 - (D0 - D)) / D, 0, 1)`` (a spectrogram in [0, 1] is ``(dB - peak + D0) / D0``);
-- which end of the Doppler axis is approaching: a mirror about the zero row.
-
-A receiver noise floor (its level and looks, :func:`add_noise_floor`) is added to the simulated rows
-without a new simulation either.
+level. The unknowns that are not ``simulated`` cost no new simulation: rows synthesised at a deep floor D0
+(a spectrogram in [0, 1] is ``(dB - peak + D0) / D0``) are power relative to their peak down to D0, to which
+receiver noise (its level and looks) is added and the chain's scaling is applied (the dB floor, linear or dB,
+magnitude or power, the normalisation); which end of the Doppler axis is approaching is a mirror about the
+zero row.
 
 The loop period (v_max), the time per column and the chirps a frame (zero-padded to the Doppler
 bins: fewer chirps widen every Doppler line) need a simulation each. The uncertainty is a
 bootstrap over the measured rows (classes resampled within themselves): the share of resamples that
-choose each candidate value, and the 2.5-97.5 % range of the chosen values.
+choose each candidate value, and the 2.5-97.5 % range of the chosen values. A numeric value chosen at the edge
+of its grid is reported as such (:func:`grid_edges`), with how to widen the grid.
 """
 
 from __future__ import annotations
@@ -32,18 +31,21 @@ import json
 import logging
 import shutil
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import h5py
 import numpy as np
 
+import torch
+
 from handradar.atomic import atomic_path
-from handradar.data.hdf5 import read_attrs
-from handradar.data.measured import Manifest, dataset_chain, synthesis_radar
-from handradar.errors import FormatError
+from handradar.data.measured import RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
+from handradar.data.unknowns import UNKNOWN, UNKNOWNS
 from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
+from handradar.radar.chain import ChainConfig, power_to_unit
+from handradar.radar.config import RadarConfig
 from handradar.synthesis.providers import synthesize_source
 
 log = logging.getLogger(__name__)
@@ -61,87 +63,146 @@ def mirror_doppler(x: np.ndarray) -> np.ndarray:
     return np.roll(x[..., ::-1, :], 1 - n % 2, axis=-2)
 
 
-def refloor(x: np.ndarray, from_db: float, to_db: float) -> np.ndarray:
-    """Spectrograms in [0, 1] with a floor ``from_db`` below their peak, re-expressed with the floor at ``to_db`` (<= from_db)."""
-    if to_db > from_db:
-        raise ValueError(f"cannot lower a {from_db:g} dB floor to {to_db:g} dB: what lay below it is lost")
-    return np.clip((x * from_db - (from_db - to_db)) / to_db, 0.0, 1.0).astype(np.float32)
-
-
-def measured_manifest(real_path: str | Path) -> tuple[Manifest, tuple[int, int]]:
-    """The manifest a measured dataset file was built from, and its (doppler, columns) grid."""
-    attrs = read_attrs(real_path)
-    if attrs.get("skeletons") != "none" or "manifest" not in attrs:
-        raise FormatError(real_path, "not a measured dataset (data=measured data.manifest=FILE builds one)")
-    return Manifest.from_dict(json.loads(attrs["manifest"]), Path(real_path)), (attrs["chain"].n_doppler,
-                                                                                attrs["chain"].n_columns)
+def noisy_power(x: np.ndarray, noise_db: float | None, rng: np.random.Generator, looks: int = 1) -> np.ndarray:
+    """Rows at a ``DEEP_FLOOR_DB`` floor as power relative to each row's peak, ``10^((x D0 - D0) / 10)``, with white
+    receiver noise of mean power ``10^(noise_db / 10)`` a pixel added (``noise_db`` < 0: below the noise-free peak;
+    None: none). A pixel's noise is the power of ``looks`` independent complex Gaussian cells averaged (range bins
+    or antennas collapsed into one Doppler row): gamma-distributed with shape ``looks`` and mean 1; ``looks`` = 1 is
+    the exponential power of one cell. float64."""
+    d0 = DEEP_FLOOR_DB
+    power = 10.0 ** ((x.astype(np.float64) * d0 - d0) / 10.0)
+    if noise_db is None:
+        return power
+    if int(looks) < 1:
+        raise ValueError(f"noise looks must be a positive count, found {looks}")
+    return power + 10.0 ** (noise_db / 10.0) * rng.gamma(float(int(looks)), 1.0 / int(looks), size=x.shape)
 
 
 def add_noise_floor(x: np.ndarray, noise_db: float, rng: np.random.Generator, looks: int = 1) -> np.ndarray:
-    """Rows at a ``DEEP_FLOOR_DB`` floor with receiver noise added, at the same floor again.
-
-    Each row's power relative to its peak, ``10^((x D0 - D0) / 10)``, gains white noise of mean power
-    ``10^(noise_db / 10)`` per pixel (``noise_db`` < 0: below the noise-free peak). A pixel's noise is the power of
-    ``looks`` independent complex Gaussian cells averaged (range bins or antennas collapsed into one Doppler
-    row): gamma-distributed with shape ``looks`` and mean 1; ``looks`` = 1 is the exponential power of one cell.
-    The row is then rescaled to its new peak (handradar.radar.chain power_to_unit)."""
-    if int(looks) < 1:
-        raise ValueError(f"noise looks must be a positive count, found {looks}")
-    d0 = DEEP_FLOOR_DB
-    noise = rng.gamma(float(int(looks)), 1.0 / int(looks), size=x.shape)
-    power = 10.0 ** ((x.astype(np.float64) * d0 - d0) / 10.0) + 10.0 ** (noise_db / 10.0) * noise
-    db = 10.0 * np.log10(power)
-    top = db.max(axis=(-2, -1), keepdims=True)
-    return np.clip((db - top + d0) / d0, 0.0, 1.0).astype(np.float32)
+    """Rows at a ``DEEP_FLOOR_DB`` floor with receiver noise added (:func:`noisy_power`), at the same floor again,
+    rescaled to their new peak (handradar.radar.chain power_to_unit)."""
+    power = noisy_power(x, noise_db, rng, looks)
+    return power_to_unit(torch.from_numpy(power), ChainConfig(dynamic_range_db=DEEP_FLOOR_DB)).numpy().astype(np.float32)
 
 
-FINISH_KEYS = ("noise_db", "noise_looks", "dynamic_range_db", "approaching")  # what finish_rows applies
+FINISHED = tuple(k for k, u in UNKNOWNS.items() if not u.simulated)  # what finish_rows applies
+_DEFAULTS = {"scale": "db", "quantity": "power", "normalise": "image"}  # the simulated rows' own processing
 
 
-def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: int) -> np.ndarray:
-    """Rows simulated at a ``DEEP_FLOOR_DB`` floor, approaching high, as ``values`` says the dataset shows them: receiver
-    noise (``noise_db``, None: none; ``noise_looks`` cells averaged per pixel, default 1), the dB floor
-    (``dynamic_range_db``), the approaching end (``approaching``)."""
-    if values.get("noise_db") is not None:
-        x = add_noise_floor(x, float(values["noise_db"]), np.random.default_rng([int(seed), 7]),
+def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: int,
+                processing: ChainConfig | None = None) -> np.ndarray:
+    """Rows simulated at a ``DEEP_FLOOR_DB`` floor (dB, each row to its peak), approaching high, as the dataset shows
+    them: receiver noise (``noise_db``, None: none; ``noise_looks`` cells averaged per pixel, default 1), then the
+    dataset's processing (``processing``: its chain's quantity, scale, normalisation, CFAR and threshold; default
+    the simulated rows' own) with ``values``' ``scale``, ``quantity``, ``normalise`` and ``dynamic_range_db`` over
+    it, then the approaching end (``approaching``). What lay below the deep floor is lost: the CFAR's training cells
+    and a column's own peak see at most ``DEEP_FLOOR_DB`` of range."""
+    chain = processing or ChainConfig(dynamic_range_db=DEEP_FLOOR_DB)
+    changes = {k: (None if values[k] == _DEFAULTS.get(k) else values[k])
+               for k in ("scale", "quantity", "normalise", "dynamic_range_db") if values.get(k) is not None}
+    chain = replace(chain, **changes)
+    steps = (chain.quantity, chain.scale, chain.normalise, chain.cfar, chain.threshold)
+    if values.get("noise_db") is not None or steps != (None,) * 5 or chain.dynamic_range_db != DEEP_FLOOR_DB:
+        power = noisy_power(x, values.get("noise_db"), np.random.default_rng([int(seed), 7]),
                             int(values.get("noise_looks") or 1))
-    if values.get("dynamic_range_db") is not None:
-        x = refloor(x, DEEP_FLOOR_DB, float(values["dynamic_range_db"]))
+        x = power_to_unit(torch.from_numpy(power), chain).numpy().astype(np.float32)
     return mirror_doppler(x) if values.get("approaching", "high") == "low" else x
 
 
+ONE_STEP: dict[str, dict] = {  # steps the unpaired gap report switches on alone over the fitted chain
+    "linear power": {"scale": "linear", "quantity": None},
+    "linear magnitude": {"scale": "linear", "quantity": "magnitude"},
+    "per-frame scaling": {"normalise": "frame"},
+    "CA-CFAR (guard 4, training 8, 10 dB)": {"cfar": (4, 8, 10.0)},
+    "threshold 0.2": {"threshold": 0.2},
+}
+
+
+def one_step_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: int,
+                  chain: ChainConfig) -> dict[str, np.ndarray]:
+    """Rows as simulated (``DEEP_FLOOR_DB``) finished by the fitted chain with each step of :data:`ONE_STEP` switched
+    on alone (:func:`finish_rows`; a step the chain already takes is left out), by step name."""
+    fitted = replace(chain, **{k: (None if values.get(k) == _DEFAULTS.get(k) else values[k])
+                               for k in ("scale", "quantity", "normalise") if values.get(k) is not None})
+    rest = {k: v for k, v in values.items() if k not in ("scale", "quantity", "normalise")}
+    out = {}
+    for name, step in ONE_STEP.items():
+        changed = replace(fitted, **step)
+        if changed != fitted:
+            out[name] = finish_rows(x, rest, seed, changed)
+    return out
+
+
+def synthesis_radar(m: Manifest, shape: tuple[int, int], values: Mapping[str, float]) -> RadarConfig:
+    """A radar whose frame-based Doppler map has the dataset's grid: ``chirps_per_frame`` chirp loops a frame
+    (default the Doppler FFT's bins, at most that: the chain zero-pads them to ``processing.doppler_fft``, else to
+    the ``shape[0]`` rows), a loop period giving ``v_max_m_s`` (v_max = lambda / (4 T_loop)), ``frame_period_s`` a
+    column.
+
+    ``values`` gives the manifest's unknowns (fitted); the fast-time set-up (which only places the
+    hand in range bins, summed over by the chain) is the AWR1843 default's. One TX, one RX."""
+    known = {k: v for k, v in m.radar.items() if v != UNKNOWN}
+    r = {**known, **{k: float(v) for k, v in values.items() if k in RADAR_FIELDS and v is not None}}
+    missing = [k for k in ("carrier_hz", "v_max_m_s", "frame_period_s") if k not in r]
+    if missing:
+        raise ValueError(f"{m.path}: radar.{missing[0]} is unknown and not fitted")
+    base = RadarConfig(start_freq_hz=r["carrier_hz"], idle_time_s=100e-6, adc_start_time_s=6e-6,
+                       ramp_end_time_s=51.2e-6, slope_hz_per_s=76.22e12, n_samples=256, sample_rate_hz=10e6)
+    loop_s = base.wavelength_m / (4.0 * r["v_max_m_s"])  # carrier_hz is the sweep start, as TI states it
+    if loop_s <= base.ramp_end_time_s + 1e-6:
+        raise ValueError(f"v_max {r['v_max_m_s']:g} m/s needs chirps of {loop_s * 1e6:.1f} us, shorter than the ramp")
+    fft = int(m.processing["doppler_fft"] or shape[0])
+    n_loops = int(r.get("chirps_per_frame", fft))
+    if not 2 <= n_loops <= fft:
+        raise ValueError(f"{m.path}: {n_loops} chirps a frame: expected 2 to the {fft} bins of its Doppler FFT")
+    frame_s = float(r["frame_period_s"])
+    if frame_s < n_loops * loop_s:
+        raise ValueError(f"{n_loops} chirp loops of {loop_s * 1e3:.3f} ms (v_max {r['v_max_m_s']:g} m/s) do not fit in a "
+                         f"{frame_s * 1e3:g} ms frame")
+    return RadarConfig(start_freq_hz=base.start_freq_hz, idle_time_s=loop_s - base.ramp_end_time_s,
+                       adc_start_time_s=base.adc_start_time_s, ramp_end_time_s=base.ramp_end_time_s,
+                       slope_hz_per_s=base.slope_hz_per_s, n_samples=base.n_samples, sample_rate_hz=base.sample_rate_hz,
+                       n_loops=n_loops, frame_period_s=frame_s, source=f"{m.name} (synthesis radar)")
+
+
+def simulation_chain(chain: ChainConfig) -> ChainConfig:
+    """The dataset's chain as the simulator runs it: its clutter filter, Doppler FFT and range handling, images in dB
+    to each row's peak at ``DEEP_FLOOR_DB`` (what :func:`finish_rows` starts from)."""
+    return replace(chain, dynamic_range_db=DEEP_FLOOR_DB, quantity=None, scale=None, normalise=None, reference_db=None,
+                   cfar=None, threshold=None)
+
+
 def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str | None], *, per_class: int, seed: int,
-                        cache_dir: str | Path, sim: Mapping | None = None) -> Path:
+                        cache_dir: str | Path, sim: Mapping | None = None, finish: bool = True) -> Path:
     """Synthetic rows of a measured dataset's classes, cached by everything that makes them. ``values`` holds the
-    manifest's unknowns: ``v_max_m_s``, ``frame_period_s`` and ``chirps_per_frame`` set the simulated radar;
-    ``noise_db``, ``noise_looks``, ``dynamic_range_db`` and ``approaching`` are applied to the rows simulated at a deep
-    floor (:func:`finish_rows`)."""
+    manifest's unknowns (handradar.data.unknowns): the simulated ones set the radar (:func:`synthesis_radar`), the
+    others finish the rows simulated at a deep floor (:func:`finish_rows`) with the dataset's processing; ``finish``
+    False: the rows as simulated (what the fit finishes candidate by candidate)."""
     m, shape = measured_manifest(real_path)
     radar = synthesis_radar(m, shape, values)
-    chain = replace(dataset_chain(m, shape, radar.n_loops), dynamic_range_db=DEEP_FLOOR_DB)
+    chain = dataset_chain(m, shape, radar.n_loops, values)
     source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
               "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
+    simulated = simulation_chain(chain)
     # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
-    out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, chain, dict(sim or {}), 'measured/2')}.h5"
+    out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, simulated, dict(sim or {}), 'measured/2')}.h5"
     if not out.is_file():
         log.info("synthesising %d rows per class of %d classes (v_max %.2f m/s, %.1f ms per column, %d chirps a frame)",
                  per_class, len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3, radar.n_loops)
-        synthesize_source(source, out, radar=radar, chain=chain, sim=dict(sim or {}) or None,
+        synthesize_source(source, out, radar=radar, chain=simulated, sim=dict(sim or {}) or None,
                           cache_dir=Path(cache_dir) / "profiles", progress=False)
-    finish = {k: values.get(k) for k in FINISH_KEYS}
-    if finish["dynamic_range_db"] is not None and float(finish["dynamic_range_db"]) == DEEP_FLOOR_DB:
-        finish["dynamic_range_db"] = None  # the simulated floor already
-    if finish["noise_db"] is None:
-        finish["noise_looks"] = None  # no noise: its looks change nothing
-    if all(v in (None, "high") for v in finish.values()):
+    steps = {k: values.get(k) for k in FINISHED}
+    if steps["noise_db"] is None:
+        steps["noise_looks"] = None  # no noise: its looks change nothing
+    if not finish or (chain == simulated and all(steps[k] in (None, "high") for k in ("noise_db", "approaching"))):
         return out
-    finished = out.with_name(f"{out.stem}-{config_hash(finish, seed)}.h5")
+    finished = out.with_name(f"{out.stem}-{config_hash(steps, chain, seed)}.h5")
     if not finished.is_file():
         with atomic_path(finished) as tmp:
             shutil.copyfile(out, tmp)
             with h5py.File(tmp, "r+") as h5:
-                h5["spectrograms"][...] = finish_rows(h5["spectrograms"][()], finish, seed)
-                h5.attrs["finish"] = json.dumps(finish)
+                h5["spectrograms"][...] = finish_rows(h5["spectrograms"][()], steps, seed, chain)
+                h5.attrs["finish"] = json.dumps(steps)
     return finished
 
 
@@ -170,70 +231,83 @@ class UnknownsFit:
     n_rows: int
     objective: str = "means"
     n_boot: int = 0                 # resamples behind shares and ranges; 0: the uncertainty could not be estimated
+    edges: list[str] = field(default_factory=list)  # unknowns chosen at the edge of their grid (grid_edges)
 
     @classmethod
     def from_dict(cls, d: Mapping) -> UnknownsFit:
         """The fit :meth:`as_dict` wrote (the cached ``measured-fit-<hash>.json``)."""
         return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows", "n_boot")},
-                   objective=next(k for k, v in OBJECTIVES.items() if v == d.get("objective", OBJECTIVES["means"])))
+                   objective=next(k for k, v in OBJECTIVES.items() if v == d.get("objective", OBJECTIVES["means"])),
+                   edges=list(d.get("edges", [])))
 
     def as_dict(self) -> dict:
         return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
-                "n_rows": self.n_rows, "objective": OBJECTIVES[self.objective], "n_boot": self.n_boot}
+                "n_rows": self.n_rows, "objective": OBJECTIVES[self.objective], "n_boot": self.n_boot,
+                "edges": self.edges}
 
     def summary(self) -> str:
-        if not self.n_boot:
-            return ("; ".join(f"{k} {v}" for k, v in self.values.items()) +
-                    " (uncertainty not estimated: a class has fewer than 2 rows to resample)")
         parts = []
         for k, v in self.values.items():
+            edge = " AT THE EDGE of its grid" if k in self.edges else ""
+            if not self.n_boot:
+                parts.append(f"{k} {v}{edge}")
+                continue
             share = self.shares[k].get(str(v), 0.0)
             rng = f" [{self.ranges[k][0]:g}, {self.ranges[k][1]:g}]" if k in self.ranges else ""
-            parts.append(f"{k} {v}{rng} (chosen by {share:.0%} of resamples)")
-        return "; ".join(parts)
+            parts.append(f"{k} {v}{rng}{edge} (chosen by {share:.0%} of resamples)")
+        text = "; ".join(parts)
+        if not self.n_boot:
+            text += " (uncertainty not estimated: a class has fewer than 2 rows to resample)"
+        if self.edges:
+            text += (f". Widen the grid beyond the edge: synth.measured.fit.grid.{self.edges[0]}=[...] "
+                     "(docs/datasets.md#fitting-what-the-manifest-leaves-unknown)")
+        return text
 
 
 def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                  simulate: Callable[[dict], tuple[np.ndarray, np.ndarray] | None],
                  grid: Mapping[str, Sequence], *, n_boot: int = 200, boot_candidates: int = 16,
-                 seed: int = 0, objective: str = "means") -> UnknownsFit:
+                 seed: int = 0, objective: str = "means", processing: ChainConfig | None = None) -> UnknownsFit:
     """Choose the unknowns whose synthetic class means (and spreads) are closest to the measured ones (module docstring).
 
-    simulate({v_max_m_s, frame_period_s, chirps_per_frame}) -> (x, y): synthetic rows at a floor of
-    ``DEEP_FLOOR_DB``, approaching high; None where that radar is no candidate (a frame too short for its chirps).
-    grid: candidate lists for ``v_max_m_s``, ``frame_period_s``, ``dynamic_range_db`` (each <= DEEP_FLOOR_DB),
-    ``approaching`` (``high`` / ``low``) and optionally ``chirps_per_frame`` (None: as many as Doppler bins),
-    ``noise_db`` (None: no noise) and ``noise_looks`` (default 1); a single-value list fixes that unknown. The
-    bootstrap re-ranks the ``boot_candidates`` best candidates of the full fit; it is skipped (``n_boot`` 0 in the
-    result: no uncertainty) where a class has fewer than 2 rows, whose every resample is the same rows.
-    ``objective``: :data:`OBJECTIVES`.
+    simulate({simulated unknowns}) -> (x, y): synthetic rows as simulated (``DEEP_FLOOR_DB``, approaching high), None
+    where that radar is no candidate (a frame too short for its chirps). grid: candidates by unknown
+    (handradar.data.unknowns.UNKNOWNS; a single-value list fixes one, an absent one is not fitted: None is passed
+    to ``simulate``, or ``processing`` keeps its step); ``chirps_per_frame``, ``noise_db`` and ``noise_looks`` default
+    to [None] (as many chirps as Doppler bins), [None] (no noise) and [1]. The rows of each candidate are finished
+    (:func:`finish_rows`) on ``processing``. The bootstrap re-ranks the ``boot_candidates`` best candidates of the
+    full fit; it is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has fewer than 2 rows, whose
+    every resample is the same rows. ``objective``: :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
-    names = ("v_max_m_s", "frame_period_s", "chirps_per_frame", "noise_db", "noise_looks", "dynamic_range_db",
-             "approaching")
-    missing = [k for k in names if not grid.get(k) and k not in optional]
-    if missing:
-        raise ValueError(f"the fit needs candidates for {missing[0]}")
-    g = {k: list(grid.get(k) or optional[k]) for k in names}
+    unknown = sorted(set(grid) - set(UNKNOWNS))
+    if unknown:
+        raise ValueError(f"unknown fit grid entry {unknown[0]!r}; expected one of {list(UNKNOWNS)}")
+    g = {k: list(grid.get(k) or optional[k]) for k in UNKNOWNS if grid.get(k) or k in optional}
+    simulated = [k for k in g if UNKNOWNS[k].simulated]
+    finished = [k for k in g if not UNKNOWNS[k].simulated]
     combos, synth_moments = [], []
-    for v_max, frame, chirps in itertools.product(g["v_max_m_s"], g["frame_period_s"], g["chirps_per_frame"]):
-        radar = {"v_max_m_s": float(v_max), "frame_period_s": float(frame),
-                 "chirps_per_frame": None if chirps is None else int(chirps)}
+    for radar_values in itertools.product(*(g[k] for k in simulated)):
+        radar = {k: (None if v is None else int(v) if UNKNOWNS[k].kind == "count" else float(v))
+                 for k, v in zip(simulated, radar_values)}
         made = simulate(radar)
         if made is None:
             continue
         x, y = made
-        for noise, looks, floor, approaching in itertools.product(g["noise_db"], g["noise_looks"],
-                                                                  g["dynamic_range_db"], g["approaching"]):
-            if noise is None and looks != g["noise_looks"][0]:
+        for rest in itertools.product(*(g[k] for k in finished)):
+            values = {**radar, **dict(zip(finished, rest))}
+            if values.get("noise_db") is None and values.get("noise_looks", 1) != g.get("noise_looks", [1])[0]:
                 continue  # without noise its looks change nothing: one candidate
-            values = {**radar, "noise_db": noise, "noise_looks": int(looks), "dynamic_range_db": float(floor),
-                      "approaching": str(approaching)}
+            if values.get("scale", "db") == "db" and values.get("quantity") not in (None, g.get("quantity", [None])[0]):
+                continue  # in dB a magnitude's image is its power's: one candidate
+            values = {k: (int(v) if k == "noise_looks" else float(v) if isinstance(v, (int, float)) else v)
+                      for k, v in values.items()}
             combos.append(values)
-            synth_moments.append(class_moments(finish_rows(x, values, seed), y, n_classes, objective))
+            synth_moments.append(class_moments(finish_rows(x, values, seed, processing), y, n_classes, objective))
     if not combos:
         raise ValueError("no candidate of the grid could be simulated")
     synth_moments = np.stack(synth_moments)  # (combos, classes or 2 classes, doppler, columns)
+    names = list(g)
 
     def objectives(real_moments: np.ndarray, which: np.ndarray) -> np.ndarray:
         flat = np.broadcast_to(real_moments, synth_moments[which].shape).reshape(-1, *real_moments.shape[-2:])
@@ -260,7 +334,19 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
             key = str(combos[i][k])
             shares[k][key] = shares[k].get(key, 0.0) + 1.0 / n_boot
     ranges = {k: [float(np.percentile([combos[i][k] for i in chosen], q)) for q in (2.5, 97.5)]
-              for k in names if chosen and k != "approaching" and all(combos[i][k] is not None for i in chosen)}
+              for k in names if chosen and UNKNOWNS[k].numeric and all(combos[i][k] is not None for i in chosen)}
     candidates = [{**c, "gap": float(g)} for c, g in zip(combos, gaps)]
-    return UnknownsFit(values=dict(combos[best]), candidates=candidates, shares=shares, ranges=ranges,
-                       n_rows=int(len(real_y)), objective=objective, n_boot=int(n_boot))
+    values = dict(combos[best])
+    return UnknownsFit(values=values, candidates=candidates, shares=shares, ranges=ranges,
+                       n_rows=int(len(real_y)), objective=objective, n_boot=int(n_boot), edges=grid_edges(values, g))
+
+
+def grid_edges(values: Mapping[str, object], grid: Mapping[str, Sequence]) -> list[str]:
+    """The numeric unknowns whose chosen value is the smallest or largest of three or more candidates: the best may
+    lie beyond the grid."""
+    out = []
+    for k, v in values.items():
+        numbers = sorted(c for c in grid.get(k, []) if c is not None)
+        if UNKNOWNS[k].numeric and v is not None and len(numbers) >= 3 and v in (numbers[0], numbers[-1]):
+            out.append(k)
+    return out

@@ -14,7 +14,7 @@ logged (``budget.<variant>.labelled`` / ``.unlabelled``: row counts).
 
 Synthetic rows come from the motion library (handradar.hand.motions) through the classes' motions,
 simulated with the radar and chain that reproduce the dataset's processing
-(:func:`handradar.data.measured.synthesis_radar`, frame-based Doppler) at the manifest's known values
+(:func:`handradar.synthesis.measured.synthesis_radar`, frame-based Doppler) at the manifest's known values
 and ``synth.measured`` for its unknowns. Variants (handradar.vocab.MEASURED_VARIANTS), all trained by the same
 network (``model``) and training recipe (``recipe``), so that a difference between them comes from the data:
 
@@ -28,7 +28,8 @@ network (``model``) and training recipe (``recipe``), so that a difference betwe
 Metrics: ``val/acc_<variant>`` and ``test/acc_<variant>_<split>`` for each test split; the parameters
 ``measured.per_class``, ``measured.variants`` and ``measured.tests`` say which (handradar.runs.tables reads them).
 The run folder also holds the unpaired gap report of the synthetic rows against the pool (handradar.gap.unpaired: a
-report that chooses nothing).
+report that chooses nothing), naming per class the processing step that, switched on alone, explains most of the
+difference.
 """
 
 from __future__ import annotations
@@ -46,18 +47,18 @@ from omegaconf import DictConfig, OmegaConf
 from handradar.atomic import atomic_path, atomic_write_text
 from handradar.data.datamodule import FileRows
 from handradar.data.datasets import load_arrays
-from handradar.data.measured import UNKNOWN
+from handradar.data.measured import Manifest, dataset_chain, measured_manifest
+from handradar.data.unknowns import UNKNOWN, UNKNOWNS
 from handradar.data.splits import measured_split
 from handradar.errors import FormatError
 from handradar.gap.unpaired import write_unpaired_gap
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import config_hash
 from handradar.synthesis.measured import (
-    DEEP_FLOOR_DB,
     OBJECTIVES,
     UnknownsFit,
     fit_unknowns,
-    measured_manifest,
+    one_step_rows,
     synthesize_measured,
 )
 from handradar.tasks.classify import evaluate, recompute_bn_stats
@@ -108,6 +109,10 @@ class MeasuredSetup:
             raise ValueError(f"synth.measured.real_share must lie in (0, 1) or be null, found {real_share}")
         if int(m.per_class) < 1:
             raise ValueError(f"synth.measured.per_class must be >= 1, found {m.per_class}")
+        for where in ("unknowns", "fit.grid"):
+            extra = sorted(set(OmegaConf.select(m, where)) - set(UNKNOWNS))
+            if extra:
+                raise ValueError(f"synth.measured.{where}.{extra[0]} is no unknown; expected one of {list(UNKNOWNS)}")
         return cls(per_class=per_class, val_per_class=int(cfg.split.val_per_class),
                    test_seed=int(cfg.split.get("test_seed", 0)),
                    variants=tuple(v for v in cfg.variants if per_class != 0 or v == "model_synth_only"),
@@ -160,32 +165,45 @@ def label_budget(setup: MeasuredSetup, rows: MeasuredRows) -> dict[str, dict[str
     return {v: out[v] for v in setup.variants}
 
 
+def stated(m: Manifest, name: str) -> object:
+    """What the manifest states for the unknown ``name`` (handradar.data.unknowns), UNKNOWN where it leaves it to
+    the fit; a nuisance no manifest states is UNKNOWN."""
+    key = UNKNOWNS[name].manifest
+    if not key:
+        return UNKNOWN
+    section, field = key.split(".", 1)
+    if section == "axes":  # approaching: rows of a manifest that states it are already in the project's orientation
+        return UNKNOWN if m.approaching == UNKNOWN else "high"
+    return (m.radar if section == "radar" else m.processing)[field]
+
+
 def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     """The manifest's unknowns: set in ``synth.measured.unknowns``, else fitted (unpaired, :func:`fit_unknowns`) on
     the measured rows ``x``: class by class with their labels ``y``, or pooled (``y`` None: label-free, one image of
-    all rows against one of all synthetic rows). The fit is cached under the synthesis cache and logged
-    (``synth.fitted.*``)."""
+    all rows against one of all synthetic rows). Candidates: ``synth.measured.fit.grid``, else the unknown's default
+    grid (handradar.data.unknowns). The fit is cached under the synthesis cache and logged (``synth.fitted.*``); a
+    value at the edge of its grid is logged as a warning."""
     cfg = job.cfg.synth.measured
-    m, _ = measured_manifest(job.real.path)
+    m, shape = measured_manifest(job.real.path)
     given = {k: v for k, v in OmegaConf.to_container(cfg.unknowns, resolve=True).items() if v is not None}
     fit = OmegaConf.to_container(cfg.fit, resolve=True)
     grid = {}
-    for k, candidates in fit["grid"].items():
-        if k in given:
-            grid[k] = [given[k]]
-        elif k == "approaching":  # rows of a manifest that states it are already in the project's orientation
-            grid[k] = list(candidates) if m.approaching == UNKNOWN else ["high"]
-        elif k in m.radar:
-            grid[k] = list(candidates) if m.radar[k] == UNKNOWN else [m.radar[k]]
-        else:  # the receiver noise floor: no manifest field, a nuisance of the synthetic rows
-            grid[k] = list(candidates)
+    for name, u in UNKNOWNS.items():
+        if name in given:
+            grid[name] = [given[name]]
+        elif stated(m, name) != UNKNOWN:
+            grid[name] = [stated(m, name)]
+        else:
+            grid[name] = list(fit["grid"].get(name, u.grid))
     if all(len(v) == 1 for v in grid.values()):
         return {k: v[0] for k, v in grid.items()}
     pooled = y is None
     labels = np.zeros(len(x), dtype=np.int64) if pooled else y
     n_classes = 1 if pooled else len(job.real.classes)
     sim = OmegaConf.to_container(job.cfg.sim, resolve=True)
-    key = config_hash(grid, fit, sim, job.real.path.name, x.shape, float(x.sum(dtype=np.float64)), labels.tolist())
+    processing = dataset_chain(m, shape)  # the steps the manifest states; the fit's values go over them
+    key = config_hash(grid, fit, sim, processing, job.real.path.name, x.shape, float(x.sum(dtype=np.float64)),
+                      labels.tolist())
     out = Path(job.cfg.synth.cache_dir) / f"measured-fit-{key}.json"
     if out.is_file():
         result = json.loads(out.read_text())
@@ -194,9 +212,8 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
         def simulate(radar: dict) -> tuple[np.ndarray, np.ndarray] | None:
             values = {k: v for k, v in radar.items() if v is not None}
             try:
-                path = synthesize_measured(job.real.path, {**values, "dynamic_range_db": DEEP_FLOOR_DB},
-                                           per_class=int(fit["per_class"]), seed=int(fit["seed"]),
-                                           cache_dir=Path(job.cfg.synth.cache_dir), sim=sim)
+                path = synthesize_measured(job.real.path, values, per_class=int(fit["per_class"]), seed=int(fit["seed"]),
+                                           cache_dir=Path(job.cfg.synth.cache_dir), sim=sim, finish=False)
             except ValueError as exc:  # chirps that do not fit in the frame: no candidate
                 log.info("fit: %s skipped (%s)", ", ".join(f"{k} {v:g}" for k, v in values.items()), exc)
                 return None
@@ -206,9 +223,10 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
         log.info("fitting %s on %d measured rows (unpaired, %s: %s)", ", ".join(k for k, v in grid.items() if len(v) > 1),
                  len(x), "label-free" if pooled else "class by class", OBJECTIVES[str(fit["objective"])])
         result = fit_unknowns(x, labels, n_classes, simulate, grid, n_boot=int(fit["n_boot"]), seed=int(fit["seed"]),
-                              objective=str(fit["objective"])).as_dict()
+                              objective=str(fit["objective"]), processing=processing).as_dict()
         atomic_write_text(out, json.dumps(result, indent=1))
-    log.info("fitted: %s", UnknownsFit.from_dict(result).summary())
+    summary = UnknownsFit.from_dict(result)
+    (log.warning if summary.edges else log.info)("fitted: %s", summary.summary())
     job.log_params({f"synth.fitted.{k}": v for k, v in result["values"].items()})
     job.tracker.log_artifact(out, "synthesis")
     return result["values"]
@@ -222,13 +240,18 @@ def synthetic_rows(job: Job, setup: MeasuredSetup, rows: MeasuredRows) -> Path:
         values = fitted_unknowns(job, real.x[rows.train], real.y[rows.train])
     else:
         values = fitted_unknowns(job, real.x[rows.pool], None)
-    path = synthesize_measured(real.path, values, per_class=setup.synth_per_class, seed=job.seed,
-                               cache_dir=Path(cfg.synth.cache_dir), sim=OmegaConf.to_container(cfg.sim, resolve=True))
+    made = dict(per_class=setup.synth_per_class, seed=job.seed, cache_dir=Path(cfg.synth.cache_dir),
+                sim=OmegaConf.to_container(cfg.sim, resolve=True))
+    path = synthesize_measured(real.path, values, **made)
     synth = load_arrays(path)
     if not np.array_equal(np.unique(synth.y), np.arange(len(real.classes))):
         raise FormatError(path, "synthetic rows do not cover every class of the dataset")
-    if job.rank_zero:  # where synthetic differs from the measured rows (a report: it chooses nothing)
-        for f in write_unpaired_gap(real.x[rows.pool], real.y[rows.pool], synth.x, synth.y, real.classes, job.run_dir):
+    if job.rank_zero:  # where synthetic differs from the measured rows, and which step explains it (chooses nothing)
+        m, shape = measured_manifest(real.path)
+        simulated = load_arrays(synthesize_measured(real.path, values, **made, finish=False)).x
+        steps = one_step_rows(simulated, values, job.seed, dataset_chain(m, shape, values=values))
+        for f in write_unpaired_gap(real.x[rows.pool], real.y[rows.pool], synth.x, synth.y, real.classes, job.run_dir,
+                                    steps):
             job.tracker.log_artifact(f, "unpaired_gap")
     return path
 
