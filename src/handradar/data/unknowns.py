@@ -51,7 +51,7 @@ UNKNOWNS: dict[str, Unknown] = {u.name: u for u in (
             "time a column, s"),
     Unknown("chirps_per_frame", "radar.chirps_per_frame", "count", (16, 32, None), True,
             "chirp loops a frame (None: as many as the Doppler FFT's bins); fewer widen every Doppler line"),
-    Unknown("noise_db", "", "number", (None, -40.0, -30.0, -20.0), False,
+    Unknown("noise_db", "", "number", (None, -60.0, -50.0, -40.0, -30.0, -20.0), False,
             "receiver noise a pixel, dB below each row's noise-free peak (None: none)"),
     Unknown("noise_looks", "", "count", (1,), False, "cells averaged into a pixel's noise (range bins, antennas)"),
     Unknown("dynamic_range_db", "radar.dynamic_range_db", "number", (20.0, 30.0, 40.0, 50.0, 60.0), False,

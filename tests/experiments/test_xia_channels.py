@@ -1,0 +1,45 @@
+"""experiments.xia_channels: the row centroid against a closed form, and the channels read beside the DTI rows."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from experiments.xia_channels import CHANNELS, channel_means, main, row_centroids
+
+
+def test_row_centroid_closed_form():
+    image = np.zeros((40, 64))
+    image[12, :] = 1.0
+    image[20, 30:] = 3.0  # from column 30 on: (12 * 1 + 20 * 3) / 4 = 18
+    assert row_centroids(image, (10, 40)) == pytest.approx([12.0, 18.0])
+
+
+def test_channels_beside_the_dti_rows(tmp_path, capsys):
+    """A stand-in laid out as Xia et al.'s mirror: a class whose vertical-angle blob climbs over time."""
+    for channel in ("DTI", *CHANNELS):
+        for cls in ("up", "still"):
+            folder = tmp_path / "ds" / "train" / channel / cls
+            folder.mkdir(parents=True)
+            for i in range(3):
+                a = np.zeros((40, 64), np.float32)
+                for col in range(64):
+                    row = 30 - col // 4 if (channel == "VATI" and cls == "up") else 20
+                    a[row, col] = 1.0
+                np.save(folder / f"{i}.npy", a)
+    manifest = {"format": "handradar.measured/1", "name": "x", "root": ".",
+                "rows": {"layout": "ds/{split}/DTI/{class}/*.npy", "splits": {"train": "train", "A": "train"}},
+                "axes": {"doppler": "rows"}, "radar": {"carrier_hz": 77e9},
+                "classes": {"up": ["swipe_up"], "still": ["idle"]}}
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(manifest))
+    means = channel_means(tmp_path / "m.yaml")
+    up = row_centroids(means["up"]["VATI"])
+    assert up == sorted(up, reverse=True) and up[0] - up[-1] > 8
+    assert row_centroids(means["still"]["VATI"]) == pytest.approx([20.0] * 6)
+    assert main(["--manifest", str(tmp_path / "m.yaml")]) == 0
+    assert "| up | 28.0, 25.0, 23.0, 21.0, 19.0, 17.0 |" in capsys.readouterr().out  # row 30 - column // 4
+    for f in (tmp_path / "ds" / "train" / "RTI" / "up").glob("*.npy"):
+        f.unlink()
+    assert main(["--manifest", str(tmp_path / "m.yaml")]) == 2
+    assert "no RTI rows of class 'up'" in capsys.readouterr().err
