@@ -30,7 +30,7 @@ def test_the_job_refuses_what_is_no_unknown():
 
 def test_sections_and_kinds():
     assert set(by_section("radar")) == {"v_max_m_s", "frame_period_s", "chirps_per_frame", "dynamic_range_db"}
-    assert set(by_section("processing")) == {"scale", "quantity", "normalise"}
+    assert set(by_section("processing")) == {"range", "scale", "quantity", "normalise"}
     assert set(by_section("axes")) == {"approaching"}
     assert UNKNOWNS["chirps_per_frame"].check(32) is None and UNKNOWNS["chirps_per_frame"].check(32.5)
     assert UNKNOWNS["v_max_m_s"].check(0.0) and UNKNOWNS["v_max_m_s"].check(True)

@@ -40,7 +40,7 @@ from handradar.hand.motions import DEFAULT_RANGES
 from handradar.provenance import config_hash
 from handradar.data.hdf5 import read_attrs
 from handradar.data.unknowns import UNKNOWN, by_section
-from handradar.radar.chain import RANGE_MODES, ChainConfig, ClutterRemoval
+from handradar.radar.chain import ChainConfig, ClutterRemoval
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +51,7 @@ PROCESSING = {  # processing.<key>: the default where a manifest leaves it out (
     "clutter_removal": "window",  # ClutterRemoval
     "mti_lag": 1,                 # loops, for clutter_removal mti
     "doppler_fft": None,          # the Doppler FFT's bins where the image keeps its central rows (None: its rows)
-    "range": "sum",               # RANGE_MODES: how the range bins of range_gate_m become one image
+    "range": "sum",               # RANGE_MODES: how the range bins of range_gate_m become one image; unknown: fitted
     "range_gate_m": [0.08, 0.70],
     "quantity": "power",          # unknown: fitted (handradar.data.unknowns)
     "scale": "db",
@@ -251,8 +251,6 @@ def read_processing(path: Path, raw: Any) -> dict[str, Any]:
         raise bad("mti_lag", "a whole number of loops >= 1")
     if p["doppler_fft"] is not None and (type(p["doppler_fft"]) is not int or p["doppler_fft"] < 2):
         raise bad("doppler_fft", "the Doppler FFT's bins (a whole number) or null")
-    if p["range"] not in RANGE_MODES:
-        raise bad("range", f"one of {list(RANGE_MODES)}")
     gate = p["range_gate_m"]
     if not (isinstance(gate, list) and len(gate) == 2 and all(isinstance(g, (int, float)) for g in gate)
             and 0 <= gate[0] < gate[1]):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from handradar.radar.chain import NORMALISATIONS, QUANTITIES, SCALES
+from handradar.radar.chain import NORMALISATIONS, QUANTITIES, RANGE_MODES, SCALES
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,8 @@ UNKNOWNS: dict[str, Unknown] = {u.name: u for u in (
             "the dB floor below the reference"),
     Unknown("approaching", "axes.approaching", "choice", ("high", "low"), False,
             "which end of the Doppler axis is approaching", choices=("high", "low")),
+    Unknown("range", "processing.range", "choice", RANGE_MODES, True,
+            "how the range bins become one image: their sum, or each frame's strongest", choices=RANGE_MODES),
     Unknown("scale", "processing.scale", "choice", SCALES, False, "db or linear", choices=SCALES),
     Unknown("quantity", "processing.quantity", "choice", QUANTITIES, False,
             "power or magnitude (the same image in dB)", choices=QUANTITIES),

@@ -288,7 +288,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     finished = [k for k in g if not UNKNOWNS[k].simulated]
     combos, synth_moments = [], []
     for radar_values in itertools.product(*(g[k] for k in simulated)):
-        radar = {k: (None if v is None else int(v) if UNKNOWNS[k].kind == "count" else float(v))
+        radar = {k: (v if v is None or not UNKNOWNS[k].numeric else int(v) if UNKNOWNS[k].kind == "count" else float(v))
                  for k, v in zip(simulated, radar_values)}
         made = simulate(radar)
         if made is None:

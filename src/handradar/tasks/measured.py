@@ -215,7 +215,7 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
                 path = synthesize_measured(job.real.path, values, per_class=int(fit["per_class"]), seed=int(fit["seed"]),
                                            cache_dir=Path(job.cfg.synth.cache_dir), sim=sim, finish=False)
             except ValueError as exc:  # chirps that do not fit in the frame: no candidate
-                log.info("fit: %s skipped (%s)", ", ".join(f"{k} {v:g}" for k, v in values.items()), exc)
+                log.info("fit: %s skipped (%s)", ", ".join(f"{k} {v}" for k, v in values.items()), exc)
                 return None
             d = load_arrays(path)
             return d.x, np.zeros_like(d.y) if pooled else d.y
