@@ -39,6 +39,9 @@ def test_finishing_deep_rows_is_the_chain_at_the_dataset_processing(steps):
         direct = power_to_unit(power, ChainConfig(dynamic_range_db=floor, **steps)).numpy()
         finished = finish_rows(deep, {"dynamic_range_db": floor, **steps}, seed=0)
         np.testing.assert_allclose(finished, direct, atol=1e-6)
+    if steps.get("scale") != "linear":
+        with pytest.raises(ValueError, match="cannot show a 70 dB floor: the rows were simulated at 60 dB"):
+            finish_rows(deep, {"dynamic_range_db": 70.0, **steps}, seed=0)
 
 
 def measured_stand_in(root: Path, n: int = 8, truth: dict | None = None, processing: dict | None = None) -> Path:
@@ -210,11 +213,14 @@ def test_a_value_at_the_edge_of_its_grid_is_reported(tmp_path):
                         n_boot=10, seed=0)
     assert edge.values["v_max_m_s"] == 1.5 and edge.edges == ["v_max_m_s"]
     assert "v_max_m_s 1.5" in edge.summary() and "AT THE EDGE of its grid" in edge.summary()
-    assert "synth.measured.fit.grid.v_max_m_s=[...]" in edge.summary()
+    assert "synth.measured.fit.grid.v_max_m_s=[...]" in edge.summary() and "deepest" not in edge.summary()
     assert UnknownsFit.from_dict(edge.as_dict()).edges == ["v_max_m_s"]
     inside = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulate, {**base, "v_max_m_s": [1.0, 2.0, 4.0]},
                           n_boot=10, seed=0)
     assert inside.values["v_max_m_s"] == 2.0 and inside.edges == [] and "EDGE" not in inside.summary()
+    deepest = UnknownsFit(values={"dynamic_range_db": DEEP_FLOOR_DB}, candidates=[], shares={}, ranges={}, n_rows=3,
+                          edges=["dynamic_range_db"])
+    assert "at the deepest the simulated rows keep (60 dB)" in deepest.summary()
 
 
 def test_stated_steps_reach_the_synthetic_rows(tmp_path):

@@ -101,6 +101,9 @@ def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: i
     changes = {k: (None if values[k] == _DEFAULTS.get(k) else values[k])
                for k in ("scale", "quantity", "normalise", "dynamic_range_db") if values.get(k) is not None}
     chain = replace(chain, **changes)
+    if chain.dynamic_range_db > DEEP_FLOOR_DB and (chain.scale or "db") == "db":
+        raise ValueError(f"cannot show a {chain.dynamic_range_db:g} dB floor: the rows were simulated at "
+                         f"{DEEP_FLOOR_DB:g} dB and what lay below it is lost")
     steps = (chain.quantity, chain.scale, chain.normalise, chain.cfar, chain.threshold)
     if values.get("noise_db") is not None or steps != (None,) * 5 or chain.dynamic_range_db != DEEP_FLOOR_DB:
         power = noisy_power(x, values.get("noise_db"), np.random.default_rng([int(seed), 7]),
@@ -261,6 +264,9 @@ class UnknownsFit:
         if self.edges:
             text += (f". Widen the grid beyond the edge: synth.measured.fit.grid.{self.edges[0]}=[...] "
                      "(docs/datasets.md#fitting-what-the-manifest-leaves-unknown)")
+        if self.values.get("dynamic_range_db") == DEEP_FLOOR_DB:
+            text += (f"; the dB floor lies at the deepest the simulated rows keep ({DEEP_FLOOR_DB:g} dB): a deeper one "
+                     "needs DEEP_FLOOR_DB raised (handradar.synthesis.measured)")
         return text
 
 
