@@ -113,6 +113,7 @@ def _edit(path: Path, **changes) -> Path:
     ({"processing": {"threshold": 2}}, "'processing.threshold' must be a value in [0, 1) or null"),
     ({"processing": {"doppler_fft": 16}}, "'processing.doppler_fft' 16 is fewer than the images' 48 Doppler rows"),
     ({"processing": {"mti": True}}, "unknown processing step 'processing.mti'"),
+    ({"processing": {"cfar": {"guard": 20, "training": 8, "threshold_db": 10}}}, "'processing': cfar (guard 20"),
 ])
 def test_bad_manifest_is_one_line(tmp_path, change, expected):
     path = _edit(stand_in(tmp_path), **change)

@@ -33,12 +33,11 @@ import numpy as np
 
 from handradar.atomic import file_lock
 from handradar.config import read_yaml
-from handradar.data.hdf5 import open_writer
+from handradar.data.hdf5 import open_writer, read_attrs
 from handradar.data.skeletons import motion_classes
 from handradar.errors import FormatError
 from handradar.hand.motions import DEFAULT_RANGES
 from handradar.provenance import config_hash
-from handradar.data.hdf5 import read_attrs
 from handradar.data.unknowns import UNKNOWN, by_section
 from handradar.radar.chain import ChainConfig, ClutterRemoval
 
@@ -96,7 +95,8 @@ class Manifest:
                    doppler_axis=0 if axes["doppler"] == "rows" else 1, approaching=axes["approaching"],
                    zero_doppler=axes["zero_doppler"], grid=None if d["grid"] == "keep" else tuple(d["grid"]),
                    values=None if d["values"] == "per_image" else tuple(d["values"]), radar=d["radar"],
-                   processing={**PROCESSING, **d["processing"]},
+                   processing={**PROCESSING, **d.get("processing", {  # a file of before the processing section
+                       "clutter_removal": ClutterRemoval.parse(d.get("clutter_removal", True)).value})},
                    motion_ranges={k: tuple(v) for k, v in d["motion_ranges"].items()}, citation=d["citation"],
                    test_fraction=d["test_fraction"], split_seed=d["split_seed"])
 
@@ -401,18 +401,20 @@ def dataset_chain(m: Manifest, shape: tuple[int, int], chirps: int | None = None
         return None if v is None or v == default else v
 
     dr = m.radar["dynamic_range_db"] if m.radar["dynamic_range_db"] != UNKNOWN else values.get("dynamic_range_db")
-    cfar = p["cfar"]
-    n = int(chirps or fft)
-    return ChainConfig(stft_len=n, stft_hop=n, doppler_bins=fft, n_columns=shape[1],
-                       doppler_keep=shape[0] if fft != shape[0] else None, gate_m=tuple(p["range_gate_m"]),
-                       clutter_removal=p["clutter_removal"],
-                       mti_lag=p["mti_lag"] if p["clutter_removal"] == "mti" else None,
-                       range_mode=stated("range", "sum"), quantity=stated("quantity", "power"),
-                       scale=stated("scale", "db"), normalise=stated("normalise", "image"),
-                       reference_db=float(p["reference_db"]) if p["normalise"] == "none" else None,
-                       cfar=None if cfar is None else (cfar["guard"], cfar["training"], float(cfar["threshold_db"])),
-                       threshold=None if p["threshold"] is None else float(p["threshold"]),
-                       dynamic_range_db=30.0 if dr is None else float(dr))
+    cfar, n = p["cfar"], int(chirps or fft)
+    settings = dict(stft_len=n, stft_hop=n, doppler_bins=fft, n_columns=shape[1],
+                    doppler_keep=shape[0] if fft != shape[0] else None, gate_m=tuple(p["range_gate_m"]),
+                    clutter_removal=p["clutter_removal"], mti_lag=p["mti_lag"] if p["clutter_removal"] == "mti" else None,
+                    range_mode=stated("range", "sum"), quantity=stated("quantity", "power"),
+                    scale=stated("scale", "db"), normalise=stated("normalise", "image"),
+                    reference_db=float(p["reference_db"]) if p["normalise"] == "none" else None,
+                    cfar=None if cfar is None else (cfar["guard"], cfar["training"], float(cfar["threshold_db"])),
+                    threshold=None if p["threshold"] is None else float(p["threshold"]),
+                    dynamic_range_db=30.0 if dr is None else float(dr))
+    try:
+        return ChainConfig(**settings)
+    except ValueError as exc:  # a combination the chain refuses (a CFAR wider than the rows, a lag beyond the chirps)
+        raise FormatError(m.path, f"'processing': {exc}") from None
 
 
 def measured_manifest(path: str | Path) -> tuple[Manifest, tuple[int, int]]:

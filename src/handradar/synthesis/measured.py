@@ -86,7 +86,13 @@ def add_noise_floor(x: np.ndarray, noise_db: float, rng: np.random.Generator, lo
 
 
 FINISHED = tuple(k for k, u in UNKNOWNS.items() if not u.simulated)  # what finish_rows applies
-_DEFAULTS = {"scale": "db", "quantity": "power", "normalise": "image"}  # the simulated rows' own processing
+SCALING = {"scale": "db", "quantity": "power", "normalise": "image", "dynamic_range_db": None}  # and their defaults
+
+
+def with_scaling(chain: ChainConfig, values: Mapping[str, float | str | None]) -> ChainConfig:
+    """``chain`` with ``values``' scaling (:data:`SCALING`'s keys) over it; a default left unset, as in every cache."""
+    return replace(chain, **{k: (None if values[k] == default else values[k])
+                             for k, default in SCALING.items() if values.get(k) is not None})
 
 
 def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: int,
@@ -97,10 +103,7 @@ def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: i
     the simulated rows' own) with ``values``' ``scale``, ``quantity``, ``normalise`` and ``dynamic_range_db`` over
     it, then the approaching end (``approaching``). What lay below the deep floor is lost: the CFAR's training cells
     and a column's own peak see at most ``DEEP_FLOOR_DB`` of range."""
-    chain = processing or ChainConfig(dynamic_range_db=DEEP_FLOOR_DB)
-    changes = {k: (None if values[k] == _DEFAULTS.get(k) else values[k])
-               for k in ("scale", "quantity", "normalise", "dynamic_range_db") if values.get(k) is not None}
-    chain = replace(chain, **changes)
+    chain = with_scaling(processing or ChainConfig(dynamic_range_db=DEEP_FLOOR_DB), values)
     if chain.dynamic_range_db > DEEP_FLOOR_DB and (chain.scale or "db") == "db":
         raise ValueError(f"cannot show a {chain.dynamic_range_db:g} dB floor: the rows were simulated at "
                          f"{DEEP_FLOOR_DB:g} dB and what lay below it is lost")
@@ -125,9 +128,8 @@ def one_step_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed:
                   chain: ChainConfig) -> dict[str, np.ndarray]:
     """Rows as simulated (``DEEP_FLOOR_DB``) finished by the fitted chain with each step of :data:`ONE_STEP` switched
     on alone (:func:`finish_rows`; a step the chain already takes is left out), by step name."""
-    fitted = replace(chain, **{k: (None if values.get(k) == _DEFAULTS.get(k) else values[k])
-                               for k in ("scale", "quantity", "normalise") if values.get(k) is not None})
-    rest = {k: v for k, v in values.items() if k not in ("scale", "quantity", "normalise")}
+    fitted = with_scaling(chain, values)
+    rest = {k: v for k, v in values.items() if k not in SCALING}
     out = {}
     for name, step in ONE_STEP.items():
         changed = replace(fitted, **step)
