@@ -38,7 +38,7 @@ from handradar.data.skeletons import motion_classes
 from handradar.errors import FormatError
 from handradar.hand.motions import DEFAULT_RANGES
 from handradar.provenance import config_hash
-from handradar.data.unknowns import UNKNOWN, by_section
+from handradar.data.unknowns import UNKNOWN, UNKNOWNS, by_section
 from handradar.radar.chain import ChainConfig, ClutterRemoval
 
 log = logging.getLogger(__name__)
@@ -99,6 +99,18 @@ class Manifest:
                        "clutter_removal": ClutterRemoval.parse(d.get("clutter_removal", True)).value})},
                    motion_ranges={k: tuple(v) for k, v in d["motion_ranges"].items()}, citation=d["citation"],
                    test_fraction=d["test_fraction"], split_seed=d["split_seed"])
+
+    def value_of(self, unknown: str) -> object:
+        """What the manifest states for ``unknown`` (handradar.data.unknowns.UNKNOWNS), UNKNOWN where it leaves it
+        to the fit, as a nuisance no manifest states; a stated approaching end reads ``high``: the rows are already
+        in the project's orientation."""
+        key = UNKNOWNS[unknown].manifest
+        if not key:
+            return UNKNOWN
+        section, name = key.split(".", 1)
+        if section == "axes":
+            return UNKNOWN if self.approaching == UNKNOWN else "high"
+        return (self.radar if section == "radar" else self.processing)[name]
 
     def as_dict(self) -> dict[str, Any]:
         return {"format": FORMAT, "name": self.name, "layout": self.layout, "splits": self.splits, "train": self.train,

@@ -47,7 +47,7 @@ from omegaconf import DictConfig, OmegaConf
 from handradar.atomic import atomic_path, atomic_write_text
 from handradar.data.datamodule import FileRows
 from handradar.data.datasets import load_arrays
-from handradar.data.measured import Manifest, dataset_chain, measured_manifest
+from handradar.data.measured import dataset_chain, measured_manifest
 from handradar.data.unknowns import UNKNOWN, UNKNOWNS
 from handradar.data.splits import measured_split
 from handradar.errors import FormatError
@@ -165,18 +165,6 @@ def label_budget(setup: MeasuredSetup, rows: MeasuredRows) -> dict[str, dict[str
     return {v: out[v] for v in setup.variants}
 
 
-def stated(m: Manifest, name: str) -> object:
-    """What the manifest states for the unknown ``name`` (handradar.data.unknowns), UNKNOWN where it leaves it to
-    the fit; a nuisance no manifest states is UNKNOWN."""
-    key = UNKNOWNS[name].manifest
-    if not key:
-        return UNKNOWN
-    section, field = key.split(".", 1)
-    if section == "axes":  # approaching: rows of a manifest that states it are already in the project's orientation
-        return UNKNOWN if m.approaching == UNKNOWN else "high"
-    return (m.radar if section == "radar" else m.processing)[field]
-
-
 def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     """The manifest's unknowns: set in ``synth.measured.unknowns``, else fitted (unpaired, :func:`fit_unknowns`) on
     the measured rows ``x``: class by class with their labels ``y``, or pooled (``y`` None: label-free, one image of
@@ -191,8 +179,8 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     for name, u in UNKNOWNS.items():
         if name in given:
             grid[name] = [given[name]]
-        elif stated(m, name) != UNKNOWN:
-            grid[name] = [stated(m, name)]
+        elif m.value_of(name) != UNKNOWN:
+            grid[name] = [m.value_of(name)]
         else:
             grid[name] = list(fit["grid"].get(name, u.grid))
     if all(len(v) == 1 for v in grid.values()):
