@@ -73,7 +73,7 @@ NORMALISATIONS = ("image", "frame", "none")  # ChainConfig.normalise: the refere
 RANGE_MODES = ("sum", "strongest")     # ChainConfig.range_mode: how the gated range bins become one Doppler image
 
 
-def _set(**kw):  # a field added after caches keyed by the chain: unset (None), earlier cache keys hold
+def _set(**kw: object) -> object:  # a field added after caches keyed by the chain: unset (None), earlier cache keys hold
     return field(metadata={"hash_if_set": True}, **kw)
 
 
