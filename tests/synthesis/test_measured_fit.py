@@ -16,7 +16,6 @@ from handradar.data.measured import MeasuredDataset, dataset_chain, measured_man
 from handradar.radar.chain import ChainConfig, power_to_unit
 from handradar.synthesis.measured import (
     DEEP_FLOOR_DB,
-    add_noise_floor,
     finish_rows,
     fit_unknowns,
     mirror_doppler,
@@ -106,7 +105,7 @@ def test_noise_floor_closed_form():
     (E ln X = -Euler's gamma for X ~ Exp(1)), i.e. (60 - 32.51) / 60 on a 60 dB scale; the peak stays at 1."""
     x = np.zeros((4, 64, 64), np.float32)
     x[:, 10, 10] = 1.0
-    y = add_noise_floor(x, -30.0, np.random.default_rng(0))
+    y = finish_rows(x, {"noise_db": -30.0}, seed=0)
     background = np.delete(y.reshape(4, -1), 10 * 64 + 10, axis=1)
     assert background.mean() == pytest.approx((60 - 30 - 10 * np.log10(np.e) * 0.5772156649) / 60, abs=0.003)
     assert np.all(y[:, 10, 10] == 1.0)
@@ -120,7 +119,7 @@ def test_noise_looks_closed_form(looks):
     x = np.zeros((8, 64, 64), np.float32)
     x[:, 10, 10] = 1.0
     level = -30.0
-    y = add_noise_floor(x, level, np.random.default_rng(1), looks)
+    y = finish_rows(x, {"noise_db": level, "noise_looks": looks}, seed=1)
     db = np.delete(y.reshape(8, -1), 10 * 64 + 10, axis=1) * DEEP_FLOOR_DB - DEEP_FLOOR_DB
     law = stats.gamma(looks, scale=1.0 / looks)
 
@@ -135,7 +134,7 @@ def test_noise_looks_closed_form(looks):
     assert mean == pytest.approx(level + k * (special.digamma(looks) - np.log(looks)), abs=0.15)
     assert np.sqrt(var) == pytest.approx(k * np.sqrt(special.polygamma(1, looks)), abs=0.15)
     with pytest.raises(ValueError, match="positive count"):
-        add_noise_floor(x, level, np.random.default_rng(1), 0)
+        finish_rows(x, {"noise_db": level, "noise_looks": 0}, seed=1)
 
 
 def test_fit_recovers_a_noise_floor(tmp_path):

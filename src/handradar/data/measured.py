@@ -51,7 +51,7 @@ PROCESSING = {  # processing.<key>: the default where a manifest leaves it out (
     "mti_lag": 1,                 # loops, for clutter_removal mti
     "doppler_fft": None,          # the Doppler FFT's bins where the image keeps its central rows (None: its rows)
     "range": "sum",               # RANGE_MODES: how the range bins of range_gate_m become one image; unknown: fitted
-    "range_gate_m": [0.08, 0.70],
+    "range_gate_m": list(ChainConfig().gate_m),
     "quantity": "power",          # unknown: fitted (handradar.data.unknowns)
     "scale": "db",
     "normalise": "image",
@@ -408,17 +408,17 @@ def dataset_chain(m: Manifest, shape: tuple[int, int], chirps: int | None = None
     if fft < shape[0]:
         raise FormatError(m.path, f"'processing.doppler_fft' {fft} is fewer than the images' {shape[0]} Doppler rows")
 
-    def stated(key: str, default: Any) -> Any:  # the manifest's value, else the fitted one; its default unset (None)
+    def stated(key: str) -> Any:  # the manifest's value, else the fitted one; its default unset (None)
         v = p[key] if p[key] != UNKNOWN else values.get(key)
-        return None if v is None or v == default else v
+        return None if v is None or v == PROCESSING[key] else v
 
     dr = m.radar["dynamic_range_db"] if m.radar["dynamic_range_db"] != UNKNOWN else values.get("dynamic_range_db")
     cfar, n = p["cfar"], int(chirps or fft)
     settings = dict(stft_len=n, stft_hop=n, doppler_bins=fft, n_columns=shape[1],
                     doppler_keep=shape[0] if fft != shape[0] else None, gate_m=tuple(p["range_gate_m"]),
                     clutter_removal=p["clutter_removal"], mti_lag=p["mti_lag"] if p["clutter_removal"] == "mti" else None,
-                    range_mode=stated("range", "sum"), quantity=stated("quantity", "power"),
-                    scale=stated("scale", "db"), normalise=stated("normalise", "image"),
+                    range_mode=stated("range"), quantity=stated("quantity"), scale=stated("scale"),
+                    normalise=stated("normalise"),
                     reference_db=float(p["reference_db"]) if p["normalise"] == "none" else None,
                     cfar=None if cfar is None else (cfar["guard"], cfar["training"], float(cfar["threshold_db"])),
                     threshold=None if p["threshold"] is None else float(p["threshold"]),

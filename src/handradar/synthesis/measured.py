@@ -40,7 +40,7 @@ import numpy as np
 import torch
 
 from handradar.atomic import atomic_path
-from handradar.data.measured import RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
+from handradar.data.measured import PROCESSING, RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
 from handradar.data.unknowns import UNKNOWN, UNKNOWNS
 from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
@@ -78,15 +78,8 @@ def noisy_power(x: np.ndarray, noise_db: float | None, rng: np.random.Generator,
     return power + 10.0 ** (noise_db / 10.0) * rng.gamma(float(int(looks)), 1.0 / int(looks), size=x.shape)
 
 
-def add_noise_floor(x: np.ndarray, noise_db: float, rng: np.random.Generator, looks: int = 1) -> np.ndarray:
-    """Rows at a ``DEEP_FLOOR_DB`` floor with receiver noise added (:func:`noisy_power`), at the same floor again,
-    rescaled to their new peak (handradar.radar.chain power_to_unit)."""
-    power = noisy_power(x, noise_db, rng, looks)
-    return power_to_unit(torch.from_numpy(power), ChainConfig(dynamic_range_db=DEEP_FLOOR_DB)).numpy().astype(np.float32)
-
-
 FINISHED = tuple(k for k, u in UNKNOWNS.items() if not u.simulated)  # what finish_rows applies
-SCALING = {"scale": "db", "quantity": "power", "normalise": "image", "dynamic_range_db": None}  # and their defaults
+SCALING = {**{k: PROCESSING[k] for k in ("scale", "quantity", "normalise")}, "dynamic_range_db": None}  # defaults
 
 
 def with_scaling(chain: ChainConfig, values: Mapping[str, float | str | None]) -> ChainConfig:
@@ -109,8 +102,8 @@ def finish_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: i
                          f"{DEEP_FLOOR_DB:g} dB and what lay below it is lost")
     steps = (chain.quantity, chain.scale, chain.normalise, chain.cfar, chain.threshold)
     if values.get("noise_db") is not None or steps != (None,) * 5 or chain.dynamic_range_db != DEEP_FLOOR_DB:
-        power = noisy_power(x, values.get("noise_db"), np.random.default_rng([int(seed), 7]),
-                            int(values.get("noise_looks") or 1))
+        looks = values.get("noise_looks")
+        power = noisy_power(x, values.get("noise_db"), np.random.default_rng([int(seed), 7]), 1 if looks is None else looks)
         x = power_to_unit(torch.from_numpy(power), chain).numpy().astype(np.float32)
     return mirror_doppler(x) if values.get("approaching", "high") == "low" else x
 

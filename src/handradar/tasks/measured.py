@@ -179,8 +179,8 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     for name, u in UNKNOWNS.items():
         if name in given:
             grid[name] = [given[name]]
-        elif m.value_of(name) != UNKNOWN:
-            grid[name] = [m.value_of(name)]
+        elif (stated := m.value_of(name)) != UNKNOWN:
+            grid[name] = [stated]
         else:
             grid[name] = list(fit["grid"].get(name, u.grid))
     if all(len(v) == 1 for v in grid.values()):
