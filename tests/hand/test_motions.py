@@ -8,7 +8,15 @@ import pytest
 import torch
 
 from handradar.data.skeletons import motions_items, source_classes
-from handradar.hand.motions import MOTIONS, SWIPE_M, MotionDraw, motion_sequence
+from handradar.hand.motions import (
+    FOREARM_M,
+    MOTIONS,
+    SWIPE_M,
+    UPPER_ARM_M,
+    MotionDraw,
+    elbow_ik,
+    motion_sequence,
+)
 from handradar.radar.chain import ChainConfig, spectrogram_from_profiles, velocity_axis_m_s
 from handradar.radar.config import RadarConfig
 
@@ -22,11 +30,52 @@ def centre(name: str, **draw) -> np.ndarray:
 
 @pytest.mark.parametrize("name, axis, sign", [("swipe_left", 0, -1), ("swipe_right", 0, 1), ("swipe_up", 1, 1),
                                               ("swipe_down", 1, -1)])
-def test_swipes_travel_their_length_along_their_axis(name, axis, sign):
-    c = centre(name, amplitude=1.2)
+@pytest.mark.parametrize("wrist_share", [0.0, 0.3])
+def test_swipes_travel_their_length_across_the_forearm(name, axis, sign, wrist_share):
+    """The hand centre's chord is the swipe's length; it runs along the swipe's axis where that crosses the forearm
+    (left / right: within 3 % of the length; the wrist turns about the elbow's axis, not quite across the hand), and a vertical swipe, which has the forearm's tilt in its plane, also
+    moves along the line of sight: up away from the radar, down toward it (the lopsided sweep)."""
+    c = centre(name, amplitude=1.2, wrist_share=wrist_share, forearm_deg=70.0, azimuth_deg=0.0)
     travel = c[-1] - c[0]
-    assert travel[axis] == pytest.approx(sign * SWIPE_M * 1.2, abs=1e-4)
-    assert np.abs(np.delete(travel, axis)).max() < 1e-6
+    assert np.linalg.norm(travel) == pytest.approx(SWIPE_M * 1.2, abs=1e-4)
+    assert sign * travel[axis] > 0.5 * SWIPE_M * 1.2
+    if axis == 0:
+        assert np.abs(travel[1:]).max() < 0.03 * SWIPE_M * 1.2
+    else:
+        assert sign * travel[2] > 0.1 * SWIPE_M * 1.2 and abs(travel[0]) < 0.03 * SWIPE_M * 1.2
+
+
+def test_a_swipe_swings_the_hand_about_a_fixed_elbow():
+    """wrist_share 0: every joint keeps its distance from the elbow (a rigid swing), the elbow and shoulder stay, and
+    the forearm and upper arm keep their lengths; the palm faces the radar mid-swing and turns away toward the ends."""
+    draw = MotionDraw(hand_scale=1.1, forearm_deg=80.0, azimuth_deg=0.0)
+    seq = motion_sequence("swipe_right", draw)
+    elbow, shoulder = seq.arm[:, 0, 0], seq.arm[:, 0, 1]
+    assert np.ptp(elbow, axis=0).max() < 1e-6 and np.ptp(shoulder, axis=0).max() < 1e-6
+    reach = np.linalg.norm(seq.positions[:, 0] - elbow[:, None], axis=-1)
+    assert np.ptp(reach, axis=0).max() < 1e-5
+    assert reach[0, 0] == pytest.approx(FOREARM_M * 1.1, rel=1e-5)
+    assert np.linalg.norm(shoulder[0] - elbow[0]) == pytest.approx(UPPER_ARM_M * 1.1, rel=1e-5)
+    j = seq.positions[:, 0].astype(np.float64)
+    normal = np.cross(j[:, 5] - j[:, 0], j[:, 17] - j[:, 0])
+    facing = np.abs((normal * j[:, 0]).sum(-1)) / np.linalg.norm(normal, axis=-1) / np.linalg.norm(j[:, 0], axis=-1)
+    mid = int(round(draw.onset * len(facing)))
+    assert facing[mid] > 0.97 and facing[0] < facing[mid] - 0.05 and facing[-1] < facing[mid] - 0.05
+
+
+def test_the_elbow_follows_the_hand_by_two_link_inverse_kinematics():
+    """Motions that move the hand itself (a push, a circle): the shoulder stays, the upper arm and the forearm keep
+    their lengths while the wrist is within reach, and the elbow stays on the side of its rest pose."""
+    for name in ("push", "pull", "circle_cw"):
+        seq = motion_sequence(name, MotionDraw(forearm_deg=70.0))
+        wrist, elbow, shoulder = seq.positions[:, 0, 0], seq.arm[:, 0, 0], seq.arm[:, 0, 1]
+        assert np.ptp(shoulder, axis=0).max() < 1e-6
+        assert np.allclose(np.linalg.norm(elbow - shoulder, axis=-1), UPPER_ARM_M, atol=1e-5)
+        assert np.allclose(np.linalg.norm(wrist - elbow, axis=-1), FOREARM_M, atol=1e-5)
+        assert np.ptp(elbow, axis=0).max() > 0.01  # the elbow moves with the hand
+    wrist = np.array([[0.0, 0.0, 1.0]])  # beyond reach: the arm points straight at it
+    e = elbow_ik(wrist, np.zeros(3), 0.3, 0.26, np.array([0.0, 1.0, 0.0]))
+    assert e[0] == pytest.approx([0.0, 0.0, 0.3], abs=1e-6)
 
 
 def test_push_and_pull_move_along_the_line_of_sight():
@@ -112,6 +161,9 @@ def test_every_motion_is_a_valid_sequence_and_draws_are_reproducible():
     for name in MOTIONS:
         seq = motion_sequence(name, MotionDraw.draw(rng), duration_s=1.0, rate_hz=50.0)
         assert seq.positions.shape == (50, 2, 21, 3) and seq.mask[:, 0].all() and not seq.mask[:, 1].any()
+        assert seq.arm.shape == (50, 2, 2, 3) and not seq.arm[:, 1].any()
+        window = seq.resample(seq.times[:10] + 0.01)  # halfway between steps: the arm travels with the skeleton
+        assert np.allclose(window.arm[:, 0], 0.5 * (seq.arm[:10, 0] + seq.arm[1:11, 0]), atol=1e-6)
     with pytest.raises(ValueError, match="unknown motion 'wave'"):
         motion_sequence("wave", MotionDraw())
     with pytest.raises(ValueError, match="unknown motion parameter 'size'"):

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from handradar.hand.retarget import standard_hand
-from handradar.radar.chain import gate_bins, remove_static_clutter, stft_power, window
+from handradar.radar.chain import gate_bins, remove_static_clutter, stft_power, velocity_axis_m_s, window
 from handradar.sim.effects import REGISTRY, STAGES, Effect, build_effects
 from handradar.sim.effects.multipath import bounce_paths
 from handradar.sim.effects.palm import palm_frame
@@ -172,6 +172,56 @@ def test_forearm_adds_reflectors_beyond_the_wrist(radar, short_chain):
     far_long = int(torch.nonzero(extra_long > 1e-2 * extra_long.max()).max())
     assert far_long > far_short  # a longer forearm reaches farther bins
     assert float(bin_power(Simulator(radar, short_chain).slot_profiles(sk, mk)[:, 38]).sum()) == 0.0
+
+
+def _swinging_rod(times: np.ndarray, omega: float, length: float = 0.26) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A hand on a forearm of ``length`` turning at ``omega`` rad/s about a fixed elbow in the x-z plane, along x at the
+    window's middle with its outermost piece's midpoint (7/8 of it) on boresight at 0.45 m: (skeleton, mask, arm) of
+    one window, the shoulder 0.3 m behind the elbow."""
+    elbow = np.array([-0.875 * length, 0.0, 0.45])
+    hand = standard_hand() @ np.array([[0.0, 1, 0], [-1, 0, 0], [0, 0, 1]]).T  # fingers along +x, continuing the rod
+    hand = hand - hand[0] + elbow + [length, 0, 0]
+    theta = omega * (times - times.mean())
+    c, s = np.cos(theta), np.sin(theta)
+    rot = np.zeros((len(times), 3, 3))
+    rot[:, 0, 0], rot[:, 0, 2], rot[:, 1, 1], rot[:, 2, 0], rot[:, 2, 2] = c, -s, 1, s, c  # x -> (cos, 0, sin)
+    pos, mask = one_hand(times, lambda t: hand)
+    pos[:, 0] = np.einsum("tij,kj->tki", rot, hand - elbow) + elbow
+    arm = np.zeros((len(times), 2, 2, 3), np.float32)
+    arm[:, 0, 0], arm[:, 0, 1] = elbow, elbow + [0.0, 0.0, 0.3]
+    return pos, mask, arm
+
+
+def test_a_rod_swinging_about_one_end_has_doppler_from_zero_to_omega_l(radar, short_chain):
+    """First principles: a rigid rod turning at omega about one end moves each of its points at omega s, s the distance
+    from the pivot, so its Doppler runs from 0 to omega L. The forearm's points (n_segments at the pieces' midpoints
+    s = (k + 1/2) L / n), their radial part that of omega x (p - pivot). Through the chain, the arm alone lights no
+    Doppler bin beyond the outermost point's (within the Hamming window's main lobe, 2 bins) and none approaching (the
+    upper arm, from the fixed elbow to the fixed shoulder, is still: clutter removal takes it), and its strongest bin
+    is that of the piece seen nearest broadside: a cylinder's return is specular (handradar.sim.rcs)."""
+    times = steps(radar, short_chain)
+    v_axis = velocity_axis_m_s(radar, short_chain)
+    bin_m_s = float(v_axis[1] - v_axis[0])
+    for omega in (1.5, 3.0):
+        pos, mask, arm = _swinging_rod(times, omega)
+        sim = Simulator(radar, short_chain, effects=["forearm"])
+        ctx = sim.context(*batch(pos, mask), times=torch.as_tensor(times), arm=torch.as_tensor(arm[None]))
+        scat = sim.scatterers(ctx)
+        fore = scat.tx[0, :, -16:-12].double().numpy()  # hand 0's forearm points (then hand 1's, then the upper arms)
+        mid = len(times) // 2
+        v = (fore[mid + 1] - fore[mid - 1]) / (times[mid + 1] - times[mid - 1])
+        s_k = (1 - (np.arange(4) + 0.5) / 4) * 0.26  # from the wrist toward the pivot
+        assert np.linalg.norm(v, axis=-1) == pytest.approx(omega * s_k, rel=1e-3)
+        radial = (v * fore[mid]).sum(-1) / np.linalg.norm(fore[mid], axis=-1)
+        turning = omega * np.cross([0.0, -1.0, 0.0], fore[mid] - arm[mid, 0, 0])  # omega x (p - pivot)
+        assert radial == pytest.approx((turning * fore[mid]).sum(-1) / np.linalg.norm(fore[mid], axis=-1), rel=1e-3)
+        prof = sim.slot_profiles(*batch(pos, mask), times=torch.as_tensor(times), arm=torch.as_tensor(arm[None]))
+        prof[:, :38] = 0  # the arm's points alone (slot 38)
+        col = sim.render(prof)[0, :, short_chain.n_columns // 2].numpy()
+        lit = v_axis[col > 1 / 3]  # within 20 dB of the column's peak (the chain maps 30 dB to [0, 1])
+        assert lit.min() >= -float(radial.max()) - 2 * bin_m_s and lit.max() <= bin_m_s  # receding: negative
+        broadside = int(np.argmin(np.abs(fore[mid, :, 0]) / np.linalg.norm(fore[mid], axis=-1)))
+        assert v_axis[int(np.argmax(col))] == pytest.approx(-radial[broadside], abs=bin_m_s)
 
 
 # ---- multipath -----------------------------------------------------------------------------------

@@ -4,8 +4,9 @@ A measured radar dataset without skeletons (docs/datasets.md, "Measured radar da
 per class, one or more of these motions; synthesis draws skeletons from them. Each motion is a
 procedural program on the open standard hand (:func:`handradar.hand.retarget.standard_hand`):
 
-- ``swipe_left`` / ``swipe_right`` / ``swipe_up`` / ``swipe_down``: the hand translates along
-  -x / +x / +y / -y of the radar frame (the board's azimuth axis and its forward axis);
+- ``swipe_left`` / ``swipe_right`` / ``swipe_up`` / ``swipe_down``: the forearm swings about the elbow
+  (and the hand about the wrist, ``wrist_share`` of the angle), so the hand sweeps an arc whose chord
+  runs along -x / +x / +y / -y of the radar frame (the board's azimuth axis and its forward axis);
 - ``push`` / ``pull``: the hand translates toward / away from the radar along the line of sight;
 - ``tap`` / ``double_tap``: the index finger flexes toward the radar and back, once or twice;
 - ``pinch``: thumb and index tips close and open again;
@@ -14,6 +15,14 @@ procedural program on the open standard hand (:func:`handradar.hand.retarget.sta
 - ``idle``: the hand holds still with a physiological tremor (about 1 mm, 8-12 Hz); any other motion
   may carry one too (``tremor_mm``);
 - ``random``: a smooth random wander of a few centimetres (non-gesture hand movement).
+
+Every motion carries its arm (``HandSequence.arm``: elbow and shoulder at every step): the forearm
+leaves the wrist away from the fingers, tilted ``forearm_deg`` out of the palm plane away from the
+radar; the upper arm runs on to a shoulder fixed for the sequence. A swipe turns the forearm about
+the fixed elbow, so its points move from zero at the elbow to the hand's speed at the wrist, and an
+arc across the beam is lopsided: the part of the hand's path along the forearm's tilt is radial. Any
+other motion moves the hand and the elbow follows it by two-link inverse kinematics
+(:func:`elbow_ik`), the shoulder held.
 
 Radar frame (docs/architecture.md, "Coordinates and units"): z is boresight (up from the board),
 metres and seconds. The hand is placed palm toward the radar at ``distance_m`` along a direction
@@ -33,6 +42,9 @@ import numpy as np
 from handradar.hand.retarget import standard_hand
 from handradar.hand.skeleton import N_JOINTS, HandSequence
 
+# Raised whenever a motion's kinematics change: the cache keys of rows synthesised from motions hold it
+# (2: the arm, swipes swung about the elbow).
+MOTIONS_VERSION = 2
 MOTIONS: tuple[str, ...] = ("swipe_left", "swipe_right", "swipe_up", "swipe_down", "push", "pull", "tap",
                             "double_tap", "pinch", "circle_cw", "circle_ccw", "idle", "random")
 
@@ -45,6 +57,8 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "amplitude": (0.7, 1.3),       # multiplies the motion's size: 1 = a 20 cm swipe, a 5 cm circle radius
     "onset": (0.3, 0.7),           # where the motion's middle lies in the sequence (share of its duration)
     "tremor_mm": (0.0, 0.0),       # physiological tremor (8-12 Hz) added to every motion but idle, which has its own
+    "forearm_deg": (60.0, 90.0),   # forearm out of the palm plane, away from the radar (0: in it; 90: along the sight)
+    "wrist_share": (0.0, 0.4),     # share of a swipe's angle turned at the wrist (the rest at the elbow)
 }
 SWIPE_M = 0.20          # swipe and push/pull length at amplitude 1
 SWIPE_S = 0.5           # swipe duration at speed 1
@@ -54,7 +68,11 @@ CIRCLE_RADIUS_M = 0.05
 CIRCLE_S = 0.8          # one turn at speed 1
 TREMOR_M = 0.001        # physiological tremor amplitude
 WANDER_M = 0.03         # random non-gesture movement
+FOREARM_M = 0.26        # wrist to elbow at hand_scale 1 (adult forearm)
+UPPER_ARM_M = 0.30      # elbow to shoulder at hand_scale 1
+UPPER_ARM_DEG = 60.0    # the upper arm runs from the elbow away from the radar, raised this much toward the fingers
 INDEX = (5, 6, 7, 8)    # MCP, PIP, DIP, tip
+CENTRE = (0, 5, 9, 13, 17)  # the hand centre: wrist and finger MCPs
 THUMB = (1, 2, 3, 4)
 
 
@@ -69,6 +87,8 @@ class MotionDraw:
     amplitude: float = 1.0
     onset: float = 0.5
     tremor_mm: float = 0.0
+    forearm_deg: float = 75.0
+    wrist_share: float = 0.0
 
     @classmethod
     def draw(cls, rng: np.random.Generator, ranges: Mapping[str, tuple[float, float]] | None = None) -> MotionDraw:
@@ -132,15 +152,62 @@ def tremor(t: np.ndarray, amplitude_m: float, rng: np.random.Generator) -> np.nd
 def hand_pose(draw: MotionDraw, hand: str = "right") -> tuple[np.ndarray, np.ndarray]:
     """The open hand of ``draw`` in the radar frame, palm toward the radar: (joints (21, 3), centre (3,))."""
     j = standard_hand(draw.hand_scale, hand)  # wrist at 0, fingers +y, palm facing -z: toward a radar below
-    j = j - j[[0, 5, 9, 13, 17]].mean(axis=0)  # hand centre (wrist and MCPs) at the origin
+    j = j - j[list(CENTRE)].mean(axis=0)  # hand centre (wrist and MCPs) at the origin
     az = np.deg2rad(draw.azimuth_deg)
     centre = draw.distance_m * np.array([np.sin(az), 0.0, np.cos(az)])
     return j, centre
 
 
+def arm_pose(draw: MotionDraw, wrist: np.ndarray, sight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rest elbow and shoulder (3,) each of a hand whose wrist is at ``wrist``, ``sight`` the unit vector radar -> hand:
+    the forearm points away from the fingers (-y) tilted ``forearm_deg`` toward +sight, the upper arm on from the elbow
+    along +sight raised ``UPPER_ARM_DEG`` toward +y."""
+    phi, psi = np.deg2rad(draw.forearm_deg), np.deg2rad(UPPER_ARM_DEG)
+    up = np.array([0.0, 1.0, 0.0])
+    elbow = wrist + FOREARM_M * draw.hand_scale * (-np.cos(phi) * up + np.sin(phi) * sight)
+    return elbow, elbow + UPPER_ARM_M * draw.hand_scale * (np.cos(psi) * sight + np.sin(psi) * up)
+
+
+def elbow_ik(wrist: np.ndarray, shoulder: np.ndarray, upper_m: float, fore_m: float, pole: np.ndarray) -> np.ndarray:
+    """Elbows (T, 3) of a two-link arm from a fixed ``shoulder`` to each ``wrist`` (T, 3): on the circle of points
+    ``upper_m`` from the shoulder and ``fore_m`` from the wrist, the one nearest ``pole`` (3,); a wrist beyond reach
+    straightens the arm toward it."""
+    axis = wrist - shoulder
+    d = np.linalg.norm(axis, axis=-1, keepdims=True)
+    n = axis / np.maximum(d, 1e-9)
+    d = np.clip(d, abs(upper_m - fore_m) + 1e-9, upper_m + fore_m)
+    a = (upper_m**2 - fore_m**2 + d**2) / (2 * d)         # along the axis from the shoulder
+    h = np.sqrt(np.maximum(upper_m**2 - a**2, 0.0))        # the circle's radius
+    centre = shoulder + a * n
+    off = pole - centre
+    off = off - (off * n).sum(-1, keepdims=True) * n
+    return centre + h * off / np.maximum(np.linalg.norm(off, axis=-1, keepdims=True), 1e-12)
+
+
+def _swing(joints: np.ndarray, elbow: np.ndarray, axis: np.ndarray, angle: np.ndarray, wrist_share: float) -> np.ndarray:
+    """Joints (T, 21, 3) turned ``wrist_share`` of ``angle`` (T,) about the wrist, then the rest about the elbow."""
+    out = _rotate(joints, joints[:, :1], axis, wrist_share * angle)
+    return _rotate(out, elbow, axis, (1 - wrist_share) * angle)
+
+
+def _swipe_angle(pose: np.ndarray, elbow: np.ndarray, axis: np.ndarray, wrist_share: float, chord_m: float) -> float:
+    """The swing angle (radians) that carries the hand centre (wrist and MCPs) ``chord_m`` from start to end."""
+    def chord(angle: float) -> float:
+        ends = _swing(np.stack([pose, pose]), elbow, axis, np.array([-angle / 2, angle / 2]), wrist_share)
+        return float(np.linalg.norm(np.diff(ends[:, list(CENTRE)].mean(axis=1), axis=0)))
+    lo, hi = 0.0, np.pi
+    if chord(hi) <= chord_m:
+        return hi
+    for _ in range(40):  # the chord grows with the angle up to half a turn
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if chord(mid) < chord_m else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
 def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rate_hz: float = 100.0,
                     rng: np.random.Generator | None = None, hand: str = "right") -> HandSequence:
-    """One right hand (slot 0) performing motion ``name`` with ``draw``'s nuisance, ``duration_s`` long at ``rate_hz``.
+    """One right hand (slot 0) with its arm performing motion ``name`` with ``draw``'s nuisance, ``duration_s`` long
+    at ``rate_hz``.
 
     ``rng`` drives the idle tremor and the random wander (default: a fixed seed).
     """
@@ -149,20 +216,30 @@ def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rat
     rng = rng if rng is not None else np.random.default_rng(0)
     t = np.arange(int(round(duration_s * rate_hz))) / rate_hz
     pose, centre = hand_pose(draw, hand)
+    pose = pose + centre
     sight = centre / np.linalg.norm(centre)  # unit vector radar -> hand
+    elbow0, shoulder = arm_pose(draw, pose[0], sight)
     joints = np.broadcast_to(pose, (len(t), N_JOINTS, 3)).copy()
     offset = np.zeros((len(t), 3))
+    elbow = None  # None: the elbow follows the wrist (elbow_ik)
     mid = draw.onset * duration_s
 
     def tau(length_s: float) -> np.ndarray:  # 0..1 over a motion of that length centred at ``mid``
         return (t - mid) / length_s + 0.5
 
-    if name.startswith("swipe_") or name in ("push", "pull"):
-        direction = {"swipe_left": np.array([-1.0, 0, 0]), "swipe_right": np.array([1.0, 0, 0]),
-                     "swipe_up": np.array([0, 1.0, 0]), "swipe_down": np.array([0, -1.0, 0]),
-                     "push": -sight, "pull": sight}[name]
-        length = SWIPE_M * draw.amplitude
-        offset = (min_jerk(tau(SWIPE_S / draw.speed)) - 0.5)[:, None] * length * direction
+    if name.startswith("swipe_"):
+        direction = {"swipe_left": [-1.0, 0, 0], "swipe_right": [1.0, 0, 0], "swipe_up": [0, 1.0, 0],
+                     "swipe_down": [0, -1.0, 0]}[name]
+        reach = pose[list(CENTRE)].mean(axis=0) - elbow0
+        axis = np.cross(reach, direction)  # turning about it moves the hand centre along ``direction`` (its part
+        axis = axis / np.linalg.norm(axis)  # across the forearm) at the middle of the arc
+        angle = _swipe_angle(pose, elbow0, axis, draw.wrist_share, SWIPE_M * draw.amplitude)
+        swing = (min_jerk(tau(SWIPE_S / draw.speed)) - 0.5) * angle
+        joints = _swing(joints, elbow0, axis, swing, draw.wrist_share)
+        elbow = np.broadcast_to(elbow0, (len(t), 3))
+    elif name in ("push", "pull"):
+        direction = -sight if name == "push" else sight
+        offset = (min_jerk(tau(SWIPE_S / draw.speed)) - 0.5)[:, None] * SWIPE_M * draw.amplitude * direction
     elif name in ("tap", "double_tap"):
         n = 1 if name == "tap" else 2
         s = tau(n * TAP_S / draw.speed) * n
@@ -186,8 +263,14 @@ def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rat
         offset = np.apply_along_axis(lambda v: np.convolve(v, np.ones(25) / 25, mode="same"), 0, offset)
     if draw.tremor_mm > 0 and name != "idle":
         offset = offset + tremor(t, draw.tremor_mm * 1e-3, rng)
+    joints = joints + offset[:, None, :]
+    if elbow is None:
+        elbow = elbow_ik(joints[:, 0], shoulder, UPPER_ARM_M * draw.hand_scale, FOREARM_M * draw.hand_scale, elbow0)
     positions = np.zeros((len(t), 2, N_JOINTS, 3), dtype=np.float32)
-    positions[:, 0] = joints + centre + offset[:, None, :]
+    positions[:, 0] = joints
+    arm = np.zeros((len(t), 2, 2, 3), dtype=np.float32)
+    arm[:, 0, 0], arm[:, 0, 1] = elbow, shoulder
     mask = np.zeros((len(t), 2), dtype=bool)
     mask[:, 0] = True
-    return HandSequence(positions, t, mask, source=f"motion:{name}", attrs={"motion": name, "draw": asdict(draw)})
+    return HandSequence(positions, t, mask, source=f"motion:{name}", attrs={"motion": name, "draw": asdict(draw)},
+                        arm=arm)

@@ -59,6 +59,8 @@ class HandSequence:
     times: (T,) float64 seconds, strictly increasing.
     mask: (T, 2) bool, True where slot h is tracked at step t.
     source: where it came from (a file name), for error messages.
+    arm: (T, 2, 2, 3) float32 metres, each hand's elbow and shoulder, or None where the source has no arm
+         (the motion library makes one; trackers of hands do not).
     """
 
     positions: np.ndarray
@@ -66,6 +68,7 @@ class HandSequence:
     mask: np.ndarray
     source: str = "<memory>"
     attrs: dict = field(default_factory=dict)
+    arm: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.positions = np.asarray(self.positions, dtype=np.float32)
@@ -85,6 +88,12 @@ class HandSequence:
         if not np.all(np.isfinite(tracked)):
             raise FormatError(self.source, "tracked joints contain NaN or infinite coordinates")
         self.positions[~self.mask] = 0.0
+        if self.arm is not None:
+            self.arm = np.asarray(self.arm, dtype=np.float32)
+            if self.arm.shape != (t, 2, 2, 3) or not np.all(np.isfinite(self.arm[self.mask])):
+                raise FormatError(self.source, f"arm joints of shape {self.arm.shape}, or not finite where tracked; "
+                                               f"expected (T, 2, 2, 3) = ({t}, 2, 2, 3)")
+            self.arm[~self.mask] = 0.0
 
     @property
     def n_steps(self) -> int:
@@ -97,18 +106,23 @@ class HandSequence:
     def resample(self, times: np.ndarray) -> HandSequence:
         """Linear interpolation in time to ``times`` (seconds); a hand counts as tracked at t only
         if it is tracked at both neighbouring samples. Times outside the sequence are clamped."""
-        return HandSequence(*interpolate(self.positions, self.times, self.mask, np.asarray(times, dtype=np.float64)),
-                            source=self.source, attrs=dict(self.attrs))
+        times = np.asarray(times, dtype=np.float64)
+        arm = None if self.arm is None else interpolate(self.arm, self.times, self.mask, times)[0]
+        return HandSequence(*interpolate(self.positions, self.times, self.mask, times), source=self.source,
+                            attrs=dict(self.attrs), arm=arm)
 
     def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> HandSequence:
         """Rigid transform x -> R x + t of every tracked joint."""
-        pos = self.positions @ np.asarray(rotation, dtype=np.float32).T + np.asarray(translation, dtype=np.float32)
-        return HandSequence(pos, self.times.copy(), self.mask.copy(), source=self.source, attrs=dict(self.attrs))
+        r, tr = np.asarray(rotation, dtype=np.float32), np.asarray(translation, dtype=np.float32)
+        arm = None if self.arm is None else self.arm @ r.T + tr
+        return HandSequence(self.positions @ r.T + tr, self.times.copy(), self.mask.copy(), source=self.source,
+                            attrs=dict(self.attrs), arm=arm)
 
 
 def interpolate(positions: np.ndarray, times: np.ndarray, mask: np.ndarray,
                 new_times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Linear interpolation of (T, 2, 21, 3) positions and (T, 2) mask from ``times`` to ``new_times``."""
+    """Linear interpolation of (T, 2, J, 3) positions (the 21 joints, or an arm's 2) and (T, 2) mask from ``times`` to
+    ``new_times``."""
     t = np.clip(new_times, times[0], times[-1])
     hi = np.clip(np.searchsorted(times, t, side="right"), 1, len(times) - 1)
     lo = hi - 1

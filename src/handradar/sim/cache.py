@@ -61,8 +61,10 @@ def unpack(packed: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
 
 
 def slot_profiles_key(sim, skeletons: np.ndarray, masks: np.ndarray, times: np.ndarray | None = None,
-                      visibility: np.ndarray | None = None) -> str:
+                      visibility: np.ndarray | None = None, arms: np.ndarray | None = None) -> str:
     arrays = [np.asarray(skeletons, np.float32), np.asarray(masks, bool)]
+    if arms is not None:  # appended only when present: the keys of armless sources hold
+        arrays.append(np.asarray(arms, np.float32))
     if times is not None:
         arrays.append(np.asarray(times, np.float64))
     if visibility is not None:
@@ -73,7 +75,7 @@ def slot_profiles_key(sim, skeletons: np.ndarray, masks: np.ndarray, times: np.n
 @torch.no_grad()
 def cache_slot_profiles(sim, skeletons: np.ndarray, masks: np.ndarray, cache_dir: str | Path, *,
                         times: np.ndarray | None = None, visibility: np.ndarray | None = None,
-                        progress: bool = False) -> Path:
+                        arms: np.ndarray | None = None, progress: bool = False) -> Path:
     """Compute (unless present) and store the slot profiles of N windows; returns the file path.
 
     One window at a time: a batch would simulate the absent hand of its one-hand rows whenever
@@ -83,7 +85,7 @@ def cache_slot_profiles(sim, skeletons: np.ndarray, masks: np.ndarray, cache_dir
     (lzf on whole rows took longer than the simulation itself)."""
     skeletons = np.asarray(skeletons, np.float32)
     masks = np.asarray(masks, bool)
-    key = slot_profiles_key(sim, skeletons, masks, times, visibility)
+    key = slot_profiles_key(sim, skeletons, masks, times, visibility, arms)
     path = Path(cache_dir) / f"slot_profiles-{key}.h5"
     if path.is_file():
         with h5py.File(path, "r") as h5:
@@ -102,7 +104,8 @@ def cache_slot_profiles(sim, skeletons: np.ndarray, masks: np.ndarray, cache_dir
         for i in rows:
             vis = None if visibility is None else torch.as_tensor(visibility[i:i + 1])
             prof = sim.slot_profiles(torch.as_tensor(skeletons[i:i + 1]), torch.as_tensor(masks[i:i + 1]),
-                                     times=t, visibility=vis)
+                                     times=t, visibility=vis,
+                                     arm=None if arms is None else torch.as_tensor(arms[i:i + 1]))
             packed, scale = pack(prof)
             if ds is None:
                 shape = tuple(packed.shape[2:])

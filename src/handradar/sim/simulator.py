@@ -51,13 +51,14 @@ Public API:
             the chain); slot_power is needed when coherence < 1
       .render(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, doppler, columns)
             spectrogram(combine(...), slot_power(...)): what every caller with slot profiles uses
-      .summed_rows(skeletons, masks, *, times=None) -> ((B, F, L, Ch, bins) complex, slot power | None)
-      .render_rows(skeletons, masks, *, times=None, batch_size=32, progress=False) -> (N, doppler, columns)
+      .summed_rows(skeletons, masks, *, times=None, arms=None) -> ((B, F, L, Ch, bins) complex, slot power | None)
+      .render_rows(skeletons, masks, *, times=None, arms=None, batch_size=32, progress=False) -> (N, doppler, columns)
+            arms: (N, T, 2, 2, 3) elbows and shoulders of a source that has them (the motion library), for forearm
             modelling only, window by window, with no slot-profile cache (synthesis without RadarWeightNet)
       .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
       .key() -> dict of everything that determines the output (cache keys)
       .chirp_times (F, L, C) float64 buffer, seconds
-      .context(skeleton, mask, *, times, visibility) -> SimContext (retargeted joints, ...) for effects
+      .context(skeleton, mask, *, times, visibility, arm=None) -> SimContext (retargeted joints, ...) for effects
       .scatterers(ctx) -> Scatterers (bones + scatterer-stage effects);  .profiles_of(scat, times) -> slot profiles
     slot 38 of the profiles holds the unweighted reflectors (palm, forearm, multipath's bone-to-bone
     bounces). With the cache's float16 real view pass its ``scale``.
@@ -171,8 +172,9 @@ class Simulator(nn.Module):
 
     # ---- the pipeline ------------------------------------------------------------------------------
     def context(self, skeleton: torch.Tensor, mask: torch.Tensor, *, times: torch.Tensor | None = None,
-                visibility: torch.Tensor | None = None) -> SimContext:
-        """Skeleton-stage effects and retargeting: the context the scatterer effects see."""
+                visibility: torch.Tensor | None = None, arm: torch.Tensor | None = None) -> SimContext:
+        """Skeleton-stage effects and retargeting: the context the scatterer effects see (``arm``: (B, T, 2, 2, 3)
+        elbows and shoulders, passed on as they are)."""
         skeleton, mask = self._check(skeleton, mask)
         times = self.default_times(skeleton.shape[1]) if times is None else torch.as_tensor(
             times, dtype=torch.float64, device=skeleton.device)
@@ -182,12 +184,16 @@ class Simulator(nn.Module):
         joints = retarget(skeleton, self.lengths.to(skeleton.dtype)) if self.hand.retarget else skeleton
         if visibility is not None:
             visibility = torch.as_tensor(visibility, dtype=skeleton.dtype, device=skeleton.device)
-        return SimContext(joints, mask, times, visibility, self.radar, self.chain, self.hand, self.rcs_exponent)
+        if arm is not None:
+            arm = torch.as_tensor(arm, dtype=joints.dtype, device=joints.device)
+            if arm.shape != (*joints.shape[:3], 2, 3):
+                raise ValueError(f"expected arm (B, T, 2, 2, 3) beside skeleton {tuple(joints.shape)}, found {tuple(arm.shape)}")
+        return SimContext(joints, mask, times, visibility, self.radar, self.chain, self.hand, self.rcs_exponent, arm)
 
     def slot_profiles(self, skeleton: torch.Tensor, mask: torch.Tensor, *, times: torch.Tensor | None = None,
-                      visibility: torch.Tensor | None = None) -> torch.Tensor:
+                      visibility: torch.Tensor | None = None, arm: torch.Tensor | None = None) -> torch.Tensor:
         """Per-slot range profiles (B, 39, F, L, Ch, bins): 38 bone slots + 1 unweighted slot."""
-        ctx = self.context(skeleton, mask, times=times, visibility=visibility)
+        ctx = self.context(skeleton, mask, times=times, visibility=visibility, arm=arm)
         return self._profiles(ctx)
 
     def scatterers(self, ctx: SimContext) -> Scatterers:
@@ -317,39 +323,43 @@ class Simulator(nn.Module):
         return self.spectrogram(signal, power)
 
     @torch.no_grad()
-    def summed_rows(self, skeletons: torch.Tensor, masks: torch.Tensor, *,
-                    times: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor | None]:
+    def summed_rows(self, skeletons: torch.Tensor, masks: torch.Tensor, *, times: torch.Tensor | None = None,
+                    arms: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor | None]:
         """Modelling only: each window's reflection points simulated and summed, (B, F, L, Ch, bins) complex, and
         when coherence < 1 the slots' own power (B, doppler, columns), else None. One window at a time, as the
         slot-profile cache is filled (sim.cache), but nothing is stored, and at coherence 1 no slot is built."""
         signals, powers = [], []
         for i in range(skeletons.shape[0]):
+            ctx = self.context(skeletons[i:i + 1], masks[i:i + 1], times=times,
+                               arm=None if arms is None else arms[i:i + 1])
             if self.coherence < 1.0:
-                prof = self.slot_profiles(skeletons[i:i + 1], masks[i:i + 1], times=times)
+                prof = self._profiles(ctx)
                 signals.append(self.combine(prof))
                 powers.append(self.slot_power(prof))
             else:
-                ctx = self.context(skeletons[i:i + 1], masks[i:i + 1], times=times)
                 signals.append(self.profiles_of(self.scatterers(ctx), ctx.times, summed=True))
         return torch.cat(signals), torch.cat(powers) if powers else None
 
     @torch.no_grad()
     def render_rows(self, skeletons: torch.Tensor | np.ndarray, masks: torch.Tensor | np.ndarray, *,
-                    times: torch.Tensor | np.ndarray | None = None, batch_size: int = 32,
-                    progress: bool = False) -> torch.Tensor:
+                    times: torch.Tensor | np.ndarray | None = None, arms: torch.Tensor | np.ndarray | None = None,
+                    batch_size: int = 32, progress: bool = False) -> torch.Tensor:
         """Modelling-only spectrograms (N, doppler, columns) of N windows, without the slot-profile cache
-        (skeletons (N, T, 2, 21, 3) metres, masks (N, T, 2), times (T,) seconds: tensors or arrays).
+        (skeletons (N, T, 2, 21, 3) metres, masks (N, T, 2), times (T,) seconds, arms (N, T, 2, 2, 3) elbows and
+        shoulders or None: tensors or arrays).
 
         :meth:`summed_rows` of ``batch_size`` windows at a time, then the signal effects and the chain on each
         batch: the rows and draws of :meth:`render` on the cache's batches, less its float16 rounding, and no
         39 slots a row written (2.5 MB at 4096 chirps) that nothing reads again. (Worker processes were slower
         than torch's own threads on 2 cores: docs/architecture.md.)"""
         skeletons, masks = torch.as_tensor(skeletons), torch.as_tensor(masks)
+        arms = None if arms is None else torch.as_tensor(arms)
         batches = [slice(i, i + batch_size) for i in range(0, skeletons.shape[0], batch_size)]
         if progress:
             from tqdm import tqdm
             batches = tqdm(batches, desc=f"spectrograms ({batch_size} rows a step)", unit="step")
-        out = [self.spectrogram(*self.summed_rows(skeletons[b], masks[b], times=times)) for b in batches]
+        out = [self.spectrogram(*self.summed_rows(skeletons[b], masks[b], times=times,
+                                                      arms=None if arms is None else arms[b])) for b in batches]
         return torch.cat(out) if out else torch.zeros(0, self.chain.n_doppler, self.chain.n_columns)
 
     def forward(self, skeleton: torch.Tensor, mask: torch.Tensor, weights: torch.Tensor | None = None, *,

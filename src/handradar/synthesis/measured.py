@@ -42,6 +42,7 @@ import torch
 from handradar.atomic import atomic_path
 from handradar.data.measured import PROCESSING, RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
 from handradar.data.unknowns import UNKNOWN, UNKNOWNS
+from handradar.hand.motions import MOTIONS_VERSION
 from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig, power_to_unit
@@ -183,7 +184,8 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
               "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
     simulated = simulation_chain(chain)
     # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
-    out = Path(cache_dir) / f"measured-synth-{config_hash(source, radar, simulated, dict(sim or {}), 'measured/2')}.h5"
+    key = config_hash(source, radar, simulated, dict(sim or {}), 'measured/2', MOTIONS_VERSION)
+    out = Path(cache_dir) / f"measured-synth-{key}.h5"
     if not out.is_file():
         log.info("synthesising %d rows per class of %d classes (v_max %.2f m/s, %.1f ms per column, %d chirps a frame)",
                  per_class, len(m.classes), radar.max_velocity_m_s, radar.frame_period_s * 1e3, radar.n_loops)

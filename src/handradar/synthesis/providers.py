@@ -258,15 +258,16 @@ def synthesize_source(source_cfg: Any, out: str | Path, *, radar: RadarConfig, c
     windows = [motion_window(it.sequence, n_steps, skeleton_rate_hz) for it in items]
     skel = np.stack([w.positions for w in windows])
     mask = np.stack([w.mask for w in windows])
+    arms = np.stack([w.arm for w in windows]) if all(w.arm is not None for w in windows) else None
     times = windows[0].times
     occlusion = any(e.name == "occlusion" for e in simulator.effects)
     if net is None and not occlusion:  # modelling only: the slots are summed as simulated, never stored
-        spec = simulator.render_rows(skel, mask, times=times, progress=progress).numpy().astype(np.float32)
+        spec = simulator.render_rows(skel, mask, times=times, arms=arms, progress=progress).numpy().astype(np.float32)
     else:
         cache_dir = Path(cache_dir) if cache_dir is not None else Path(out).parent / ".handradar-cache"
         feats = cached_bone_features(skel, times, mask, radar.wavelength_m, simulator.hand, cache_dir,
                                      rcs_exponent=simulator.rcs_exponent, progress=progress, n_jobs=n_jobs)
-        path = cache_slot_profiles(simulator, skel, mask, cache_dir, times=times, progress=progress,
+        path = cache_slot_profiles(simulator, skel, mask, cache_dir, times=times, arms=arms, progress=progress,
                                    visibility=feats.visible_fraction() if occlusion else None)
         caches = DatasetCaches(feats, mask, times, SlotProfileCache(path))
         spec = predict_cached(simulator, net, caches, np.arange(len(items))).numpy().astype(np.float32)

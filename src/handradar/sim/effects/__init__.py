@@ -24,7 +24,7 @@ Contract of an effect (handradar.sim.effects.base.Effect):
 | tracking_jitter | skeleton | Gaussian smoothing in time of the tracked joints | sigma_s (0.01; 0-0.1) |
 | sync_offset | skeleton | skeleton steps moved on the radar clock: pose at t is shown at t + offset | offset_s (0; +-0.25) |
 | palm | scatterers | + one disc reflector per hand at the palm centre, normal from the palm plane | radius_m (0.02; 0.005-0.06) |
-| forearm | scatterers | + a cylinder from the wrist to an elbow fixed over the window, n_segments points | length_m (0.15; 0.02-0.3), radius_m (0.03; 0.015-0.05) |
+| forearm | scatterers | + a cylinder from the wrist to the source's elbow and one on to its shoulder (the motion library's arm), else to an elbow fixed over the window; n_segments points each | length_m (0.15; 0.02-0.3), radius_m (0.03; 0.015-0.05) |
 | occlusion | scatterers | bone amplitude x sqrt(t + (1 - t) f), f = visible/facing vertices | transmission (0; 0-1) |
 | multipath | scatterers | + bone-to-bone double bounces, hand -> table (z = -height) -> hand and hand -> hand, the n_paths strongest of each | height_m (0.01; 0-0.5), reflection_coeff (0.5; 0-1), scale (0.1; 0-4) |
 | antenna_pattern | scatterers | amplitude x sqrt(G(theta_tx) G(theta_rx)), G = cos^q (0 behind the board) | q (4; 0-12) |

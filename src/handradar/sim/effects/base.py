@@ -41,6 +41,7 @@ class SimContext:
     mask: (B, T, 2) bool tracked hands; times: (T,) or (B, T) seconds of the skeleton steps.
     visibility: (B, T, 2, 19) visible / facing vertex fraction, or None (occlusion computes it).
     radar, chain, the hand model and the cylinder RCS aspect exponent (for effects that add reflectors).
+    arm: (B, T, 2, 2, 3) metres, each hand's elbow and shoulder where the source has an arm, else None.
     """
 
     joints: torch.Tensor
@@ -51,6 +52,7 @@ class SimContext:
     chain: ChainConfig
     hand: object  # handradar.hand.model.HandModelConfig
     rcs_exponent: float = 1.0  # aspect exponent of cylinder RCS (handradar.sim.rcs), for effects that add cylinders
+    arm: torch.Tensor | None = None
 
 
 class Effect(nn.Module):

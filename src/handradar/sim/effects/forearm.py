@@ -1,6 +1,11 @@
-"""forearm: the wrist and forearm that move with the hand, as a cylinder from the wrist to the elbow.
+"""forearm: the arm that moves with the hand, as a cylinder from the wrist to the elbow (and on to the shoulder).
 
-The elbow is not tracked; it is taken as fixed over the window (during a hand gesture the forearm
+Where the source gives the arm (``SimContext.arm``: the motion library's elbow and shoulder at every
+step), the forearm runs from the wrist to that elbow and the upper arm, a second cylinder of the same
+radius, from the elbow to the shoulder: a swing about the elbow gives forearm Doppler from zero at the
+pivot to the wrist's, and a moving elbow gives the upper arm's. ``length_m`` is then unused.
+
+Otherwise the elbow is not tracked; it is taken as fixed over the window (during a hand gesture the forearm
 pivots about the elbow, which moves far less than the hand): at the mean over the tracked steps
 of wrist + length_m * u, u the unit vector from the middle MCP to the wrist (away from the
 fingers). The cylinder from the moving wrist to that elbow, of radius_m, is cut into
@@ -50,16 +55,22 @@ class Forearm(Effect):
 
     def apply_scatterers(self, scat, ctx):
         wrist = ctx.joints[..., 0, :]
-        length = self.value("length_m").to(wrist.dtype)
-        axis = fixed_elbow(ctx.joints, ctx.mask, length) - wrist  # (B, T, 2, 3) wrist -> elbow
-        k = (torch.arange(self.n_segments, device=wrist.device, dtype=wrist.dtype) + 0.5) / self.n_segments
-        pos = wrist[..., None, :] + k[:, None] * axis[..., None, :]  # (B, T, 2, S, 3)
+        if ctx.arm is None:
+            return scat.cat(self._cylinder(wrist, fixed_elbow(ctx.joints, ctx.mask, self.value("length_m").to(wrist.dtype)), ctx))
+        return scat.cat(self._cylinder(wrist, ctx.arm[..., 0, :], ctx)).cat(
+            self._cylinder(ctx.arm[..., 0, :], ctx.arm[..., 1, :], ctx))
+
+    def _cylinder(self, start: torch.Tensor, end: torch.Tensor, ctx) -> Scatterers:
+        """``n_segments`` points a hand of a cylinder from ``start`` to ``end`` (B, T, 2, 3), unweighted."""
+        axis = end - start
+        k = (torch.arange(self.n_segments, device=start.device, dtype=start.dtype) + 0.5) / self.n_segments
+        pos = start[..., None, :] + k[:, None] * axis[..., None, :]  # (B, T, 2, S, 3)
         seg = (axis.norm(dim=-1) / self.n_segments)[..., None]
-        rcs = cylinder_rcs_m2(cos_angle(pos, axis[..., None, :].expand_as(pos)), self.value("radius_m").to(wrist.dtype),
+        rcs = cylinder_rcs_m2(cos_angle(pos, axis[..., None, :].expand_as(pos)), self.value("radius_m").to(start.dtype),
                               seg, ctx.radar.wavelength_m, ctx.rcs_exponent)
-        b, t = wrist.shape[:2]
+        b, t = start.shape[:2]
         n = 2 * self.n_segments
-        gain = ctx.mask.to(wrist.dtype)[..., None].expand(b, t, 2, self.n_segments).reshape(b, t, n)
+        gain = ctx.mask.to(start.dtype)[..., None].expand(b, t, 2, self.n_segments).reshape(b, t, n)
         pos = pos.reshape(b, t, n, 3)
-        owner = torch.full((n,), -1, dtype=torch.long, device=wrist.device)
-        return scat.cat(Scatterers(pos, pos, rcs.reshape(b, t, n), gain, owner))
+        owner = torch.full((n,), -1, dtype=torch.long, device=start.device)
+        return Scatterers(pos, pos, rcs.reshape(b, t, n), gain, owner)
