@@ -5,7 +5,9 @@
 Per class, the class-mean image of the split's rows in each channel (VATI: vertical angle x time, RTI: range x
 time, HATI: horizontal angle x time; the DTI's folders with DTI replaced by the channel's name), and its row
 centroid (intensity-weighted mean row) at a few columns: a sweep across the beam moves the centroid of an
-angle channel and leaves the range flat; a push or pull moves the range. Needs the whole mirror
+angle channel and leaves the range flat; a push or pull moves the range. Then each row's cycles: the number of
+periods over its columns at which the spectrum of its centroid series peaks (1-8), counted over the class's rows: a
+circle turning n times moves the range and the angles n times. Needs the whole mirror
 (``handradar-fetch dataset=xia2021``: every channel), not the DTI-only copy. Writes nothing.
 """
 
@@ -32,8 +34,17 @@ def row_centroids(image: np.ndarray, columns: tuple[int, ...] = COLUMNS) -> list
     return list((rows * cols).sum(axis=0) / np.maximum(cols.sum(axis=0), 1e-12))
 
 
-def channel_means(manifest: str | Path, root: str | Path | None = None, split: str = "train") -> dict[str, dict]:
-    """{class: {channel: class-mean image}} of ``split``'s rows in every channel of :data:`CHANNELS`."""
+def dominant_cycles(images: np.ndarray, most: int = 8) -> np.ndarray:
+    """Per image of (n, rows, columns): the number of periods (1..``most``) over its columns at which the magnitude
+    spectrum of its row-centroid series peaks."""
+    rows = np.arange(images.shape[1])[None, :, None]
+    c = (rows * images).sum(axis=1) / np.maximum(images.sum(axis=1), 1e-12)
+    spectrum = np.abs(np.fft.rfft(c - c.mean(axis=1, keepdims=True), axis=1))
+    return np.argmax(spectrum[:, 1:most + 1], axis=1) + 1
+
+
+def channel_rows(manifest: str | Path, root: str | Path | None = None, split: str = "train") -> dict[str, dict]:
+    """{class: {channel: (n, rows, columns) images}} of ``split``'s rows in every channel of :data:`CHANNELS`."""
     m = read_manifest(manifest, root)
     if "/DTI/" not in m.layout:
         raise FormatError(m.path, "rows.layout has no /DTI/ folder to swap for another channel")
@@ -46,8 +57,13 @@ def channel_means(manifest: str | Path, root: str | Path | None = None, split: s
             if not files:
                 raise FormatError(folder, f"no {channel} rows of class {cls!r}: fetch the whole mirror "
                                           "(handradar-fetch dataset=xia2021)")
-            out[cls][channel] = np.mean([read_image(f).astype(np.float64) for f in files], axis=0)
+            out[cls][channel] = np.stack([read_image(f).astype(np.float64) for f in files])
     return out
+
+
+def channel_means(manifest: str | Path, root: str | Path | None = None, split: str = "train") -> dict[str, dict]:
+    """{class: {channel: class-mean image}} of ``split``'s rows in every channel of :data:`CHANNELS`."""
+    return {cls: {ch: a.mean(axis=0) for ch, a in chans.items()} for cls, chans in channel_rows(manifest, root, split).items()}
 
 
 def main(argv: list[str]) -> int:
@@ -57,15 +73,25 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--split", default="train")
     args = ap.parse_args(argv)
     try:
-        means = channel_means(args.manifest, args.root, args.split)
+        rows = channel_rows(args.manifest, args.root, args.split)
     except FormatError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"row centroid of each class-mean image at columns {', '.join(map(str, COLUMNS))} ({args.split} split)")
     print("| class | " + " | ".join(CHANNELS) + " |")
     print("|---|" + "---|" * len(CHANNELS))
-    for cls, images in means.items():
-        cells = [", ".join(f"{c:.1f}" for c in row_centroids(images[ch])) for ch in CHANNELS]
+    for cls, images in rows.items():
+        cells = [", ".join(f"{c:.1f}" for c in row_centroids(images[ch].mean(axis=0))) for ch in CHANNELS]
+        print(f"| {cls} | " + " | ".join(cells) + " |")
+    print("\ncycles of each row's centroid series: the two most common counts, with their share of the rows")
+    print("| class | " + " | ".join(CHANNELS) + " |")
+    print("|---|" + "---|" * len(CHANNELS))
+    for cls, images in rows.items():
+        cells = []
+        for ch in CHANNELS:
+            counts = np.bincount(dominant_cycles(images[ch]))
+            top = np.argsort(counts)[::-1][:2]
+            cells.append(", ".join(f"{k} ({counts[k] / counts.sum():.0%})" for k in top if counts[k]))
         print(f"| {cls} | " + " | ".join(cells) + " |")
     return 0
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
-from experiments.xia_channels import CHANNELS, channel_means, main, row_centroids
+from experiments.xia_channels import CHANNELS, channel_means, dominant_cycles, main, row_centroids
 
 
 def test_row_centroid_closed_form():
@@ -14,6 +14,16 @@ def test_row_centroid_closed_form():
     image[12, :] = 1.0
     image[20, 30:] = 3.0  # from column 30 on: (12 * 1 + 20 * 3) / 4 = 18
     assert row_centroids(image, (10, 40)) == pytest.approx([12.0, 18.0])
+
+
+def test_dominant_cycles_closed_form():
+    """A blob whose row follows 20 + 8 sin(2 pi n c / 64) over the 64 columns turns n times; a one-way sweep once."""
+    images = np.zeros((4, 40, 64))
+    cols = np.arange(64)
+    for i, n in enumerate((1, 2, 3)):
+        images[i, np.round(20 + 8 * np.sin(2 * np.pi * n * cols / 64)).astype(int), cols] = 1.0
+    images[3, 30 - cols // 4, cols] = 1.0
+    assert dominant_cycles(images).tolist() == [1, 2, 3, 1]
 
 
 def test_channels_beside_the_dti_rows(tmp_path, capsys):

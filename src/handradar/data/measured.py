@@ -82,6 +82,7 @@ class Manifest:
     radar: dict[str, float | str]                 # RADAR_FIELDS, numbers or "unknown"
     processing: dict[str, Any]                    # PROCESSING: how the dataset's code made its images
     motion_ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    class_ranges: dict[str, dict[str, tuple[float, float]]] = field(default_factory=dict)  # class -> its own ranges
     citation: str = ""
     test_fraction: float | None = None            # the split rule when the layout has no {split}
     split_seed: int = 0
@@ -97,7 +98,9 @@ class Manifest:
                    values=None if d["values"] == "per_image" else tuple(d["values"]), radar=d["radar"],
                    processing={**PROCESSING, **d.get("processing", {  # a file of before the processing section
                        "clutter_removal": ClutterRemoval.parse(d.get("clutter_removal", True)).value})},
-                   motion_ranges={k: tuple(v) for k, v in d["motion_ranges"].items()}, citation=d["citation"],
+                   motion_ranges={k: tuple(v) for k, v in d["motion_ranges"].items()},
+                   class_ranges={c: {k: tuple(v) for k, v in r.items()} for c, r in d.get("class_ranges", {}).items()},
+                   citation=d["citation"],
                    test_fraction=d["test_fraction"], split_seed=d["split_seed"])
 
     def value_of(self, unknown: str) -> object:
@@ -120,7 +123,9 @@ class Manifest:
                 "grid": "keep" if self.grid is None else list(self.grid),
                 "values": "per_image" if self.values is None else list(self.values),
                 "radar": self.radar, "processing": self.processing,
-                "motion_ranges": {k: list(v) for k, v in self.motion_ranges.items()}, "citation": self.citation,
+                "motion_ranges": {k: list(v) for k, v in self.motion_ranges.items()},
+                "class_ranges": {c: {k: list(v) for k, v in r.items()} for c, r in self.class_ranges.items()},
+                "citation": self.citation,
                 "test_fraction": self.test_fraction, "split_seed": self.split_seed}
 
 
@@ -150,6 +155,18 @@ def _root(path: Path, raw: Any, override: str | Path | None) -> Path:
             return f
     raise FormatError(folders[0], f"no such folder (the manifest's root; also tried {[str(f) for f in folders[1:]]}); "
                                   "fetch the data (docs/datasets.md) or pass data.root=DIR")
+
+
+def _motion_ranges(path: Path, where: str, d: Any) -> dict[str, tuple[float, float]]:
+    """``{parameter: (low, high)}`` of a manifest's motion ranges at ``where`` (handradar.hand.motions.DEFAULT_RANGES)."""
+    if d is not None and not isinstance(d, dict):
+        raise FormatError(path, f"'{where}' must map motion parameters to [low, high]")
+    out = {}
+    for k, v in (d or {}).items():
+        if k not in DEFAULT_RANGES or not (isinstance(v, list) and len(v) == 2 and v[0] <= v[1]):
+            raise FormatError(path, f"'{where}.{k}' must be one of {sorted(DEFAULT_RANGES)} with [low, high]")
+        out[k] = (float(v[0]), float(v[1]))
+    return out
 
 
 def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
@@ -187,7 +204,8 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
     specs = {name: {"motions": spec} if isinstance(spec, (str, list)) else spec for name, spec in raw_classes.items()}
     bad = next((name for name, spec in specs.items() if not isinstance(spec, dict)), None)
     if bad is not None:
-        raise FormatError(path, f"class {bad!r}: give its motions as a list, or {{motions: [...], folder: NAME}}")
+        raise FormatError(path, f"class {bad!r}: give its motions as a list, or {{motions: [...], folder: NAME, "
+                                "ranges: {...}}")
     try:
         classes = motion_classes({name: spec.get("motions") for name, spec in specs.items()})
     except ValueError as exc:  # an unknown motion, or none
@@ -225,18 +243,16 @@ def read_manifest(path: str | Path, root: str | Path | None = None) -> Manifest:
             raise FormatError(path, f"'radar.{k}' {problem}, found {v!r}")
         radar[k] = v if v == UNKNOWN else float(v)
     processing = read_processing(path, d.get("processing") or {})
-    ranges = {}
-    for k, v in (d.get("motion_ranges") or {}).items():
-        if k not in DEFAULT_RANGES or not (isinstance(v, list) and len(v) == 2 and v[0] <= v[1]):
-            raise FormatError(path, f"'motion_ranges.{k}' must be one of {sorted(DEFAULT_RANGES)} with [low, high]")
-        ranges[k] = (float(v[0]), float(v[1]))
+    ranges = _motion_ranges(path, "motion_ranges", d.get("motion_ranges"))
+    class_ranges = {str(name): _motion_ranges(path, f"classes.{name}.ranges", spec["ranges"])
+                    for name, spec in specs.items() if spec.get("ranges")}
     return Manifest(path=path, name=str(d.get("name", path.stem)), root=_root(path, d.get("root"), root), layout=layout,
                     splits=splits, train=train, test=test, classes=classes, folders=folders,
                     doppler_axis=0 if doppler == "rows" else 1, approaching=approaching,
                     zero_doppler=None if zero is None else float(zero),
                     grid=None if grid == "keep" else (int(grid[0]), int(grid[1])),
                     values=None if values == "per_image" else (float(values[0]), float(values[1])),
-                    radar=radar, processing=processing, motion_ranges=ranges,
+                    radar=radar, processing=processing, motion_ranges=ranges, class_ranges=class_ranges,
                     citation=str(d.get("citation", "")), test_fraction=test_fraction,
                     split_seed=int(rows.get("seed", 0)))
 

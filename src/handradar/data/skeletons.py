@@ -139,8 +139,11 @@ def motion_classes(classes: Mapping[str, Sequence[str] | str]) -> dict[str, list
 
 def motions_items(root: str | Path | None = None, *, classes: Mapping[str, Sequence[str] | str], per_class: int = 100,
                   seed: int = 0, duration_s: float = 3.2, rate_hz: float = 100.0,
-                  ranges: Mapping[str, Sequence[float]] | None = None, errors: list | None = None) -> Iterator[SourceItem]:
-    """``per_class`` sequences of each class, each of one of its motions (in turn) with a drawn :class:`MotionDraw`.
+                  ranges: Mapping[str, Sequence[float]] | None = None,
+                  class_ranges: Mapping[str, Mapping[str, Sequence[float]]] | None = None,
+                  errors: list | None = None) -> Iterator[SourceItem]:
+    """``per_class`` sequences of each class, each of one of its motions (in turn) with a drawn :class:`MotionDraw`
+    (``ranges`` over the defaults, then the class's own ``class_ranges[class]``).
 
     Reproducible: item i of class c depends on (seed, c, i) only. ``root`` is unused (no files).
     """
@@ -150,7 +153,8 @@ def motions_items(root: str | Path | None = None, *, classes: Mapping[str, Seque
         for i in range(int(per_class)):
             rng = np.random.default_rng([int(seed), label, i])
             motion = motions[i % len(motions)]
-            draw = MotionDraw.draw(rng, {k: tuple(v) for k, v in (ranges or {}).items()})
+            own = {**(ranges or {}), **(class_ranges or {}).get(cls, {})}
+            draw = MotionDraw.draw(rng, {k: tuple(v) for k, v in own.items()})
             seq = motion_sequence(motion, draw, duration_s=duration_s, rate_hz=rate_hz, rng=rng)
             meta = {"gesture": cls, "motion": motion, "hands": 1, "subject": f"hand{draw.hand_scale:.2f}",
                     "repetition": i, "recording": f"{cls}/{i}"}

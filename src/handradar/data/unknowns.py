@@ -47,7 +47,7 @@ class Unknown:
 UNKNOWNS: dict[str, Unknown] = {u.name: u for u in (
     Unknown("v_max_m_s", "radar.v_max_m_s", "number", (0.7, 1.0, 1.5, 2.0, 3.0), True,
             "the Doppler axis's edge, m/s (the chirp loop's period)"),
-    Unknown("frame_period_s", "radar.frame_period_s", "number", (0.035, 0.05, 0.07, 0.1, 0.14), True,
+    Unknown("frame_period_s", "radar.frame_period_s", "number", (0.025, 0.035, 0.05, 0.07, 0.1, 0.14), True,
             "time a column, s"),
     Unknown("chirps_per_frame", "radar.chirps_per_frame", "count", (16, 32, None), True,
             "chirp loops a frame (None: as many as the Doppler FFT's bins); fewer widen every Doppler line"),

@@ -10,7 +10,7 @@ procedural program on the open standard hand (:func:`handradar.hand.retarget.sta
 - ``push`` / ``pull``: the hand translates toward / away from the radar along the line of sight;
 - ``tap`` / ``double_tap``: the index finger flexes toward the radar and back, once or twice;
 - ``pinch``: thumb and index tips close and open again;
-- ``circle_cw`` / ``circle_ccw``: the hand circles 1.5 turns in the plane holding the line of sight
+- ``circle_cw`` / ``circle_ccw``: the hand circles ``turns`` turns (1.5 unless drawn otherwise) in the plane holding the line of sight
   and x, clockwise or counter-clockwise with x to the right and the line of sight up;
 - ``idle``: the hand holds still with a physiological tremor (about 1 mm, 8-12 Hz); any other motion
   may carry one too (``tremor_mm``);
@@ -43,7 +43,7 @@ from handradar.hand.retarget import standard_hand
 from handradar.hand.skeleton import N_JOINTS, HandSequence
 
 # Raised whenever a motion's kinematics change: the cache keys of rows synthesised from motions hold it
-# (2: the arm, swipes swung about the elbow).
+# (2: the arm, swipes swung about the elbow, circles' turns drawn).
 MOTIONS_VERSION = 2
 MOTIONS: tuple[str, ...] = ("swipe_left", "swipe_right", "swipe_up", "swipe_down", "push", "pull", "tap",
                             "double_tap", "pinch", "circle_cw", "circle_ccw", "idle", "random")
@@ -59,6 +59,7 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "tremor_mm": (0.0, 0.0),       # physiological tremor (8-12 Hz) added to every motion but idle, which has its own
     "forearm_deg": (60.0, 90.0),   # forearm out of the palm plane, away from the radar (0: in it; 90: along the sight)
     "wrist_share": (0.0, 0.4),     # share of a swipe's angle turned at the wrist (the rest at the elbow)
+    "turns": (1.5, 1.5),           # a circle's turns
 }
 SWIPE_M = 0.20          # swipe and push/pull length at amplitude 1
 SWIPE_S = 0.5           # swipe duration at speed 1
@@ -89,6 +90,7 @@ class MotionDraw:
     tremor_mm: float = 0.0
     forearm_deg: float = 75.0
     wrist_share: float = 0.0
+    turns: float = 1.5
 
     @classmethod
     def draw(cls, rng: np.random.Generator, ranges: Mapping[str, tuple[float, float]] | None = None) -> MotionDraw:
@@ -248,7 +250,7 @@ def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rat
     elif name == "pinch":
         joints = _pinch(joints, bump(tau(2 * TAP_S / draw.speed)))
     elif name in ("circle_cw", "circle_ccw"):
-        turns = 1.5
+        turns = draw.turns
         s = np.clip(tau(turns * CIRCLE_S / draw.speed), 0, 1)
         phase = 2 * np.pi * turns * min_jerk(s) * (1 if name == "circle_ccw" else -1)
         radius = CIRCLE_RADIUS_M * draw.amplitude

@@ -181,7 +181,8 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     radar = synthesis_radar(m, shape, values)
     chain = dataset_chain(m, shape, radar.n_loops, values)
     source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
-              "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
+              "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()},
+              "class_ranges": {c: {k: list(v) for k, v in r.items()} for c, r in m.class_ranges.items()}}
     simulated = simulation_chain(chain)
     # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
     key = config_hash(source, radar, simulated, dict(sim or {}), 'measured/2', MOTIONS_VERSION)
