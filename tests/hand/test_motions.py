@@ -45,6 +45,17 @@ def test_swipes_travel_their_length_across_the_forearm(name, axis, sign, wrist_s
         assert sign * travel[2] > 0.1 * SWIPE_M * 1.2 and abs(travel[0]) < 0.03 * SWIPE_M * 1.2
 
 
+def test_an_elbow_out_to_the_side_turns_horizontal_swipes_lopsided():
+    """A right elbow turned out to the right: the forearm swings the hand left and away from the radar, right and
+    toward it, by the same range change; with the elbow behind the hand (0 deg) the range ends where it began."""
+    def range_change(name: str, out_deg: float) -> float:
+        c = centre(name, elbow_out_deg=out_deg, forearm_deg=75.0, azimuth_deg=0.0, distance_m=0.2)
+        return float(np.linalg.norm(c[-1]) - np.linalg.norm(c[0]))
+    left, right = range_change("swipe_left", 30.0), range_change("swipe_right", 30.0)
+    assert left > 0.03 and right == pytest.approx(-left, abs=1e-4)
+    assert abs(range_change("swipe_left", 0.0)) < 0.01
+
+
 def test_a_swipe_swings_the_hand_about_a_fixed_elbow():
     """wrist_share 0: every joint keeps its distance from the elbow (a rigid swing), the elbow and shoulder stay, and
     the forearm and upper arm keep their lengths; the palm faces the radar mid-swing and turns away toward the ends."""

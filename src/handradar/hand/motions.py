@@ -58,6 +58,7 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "onset": (0.3, 0.7),           # where the motion's middle lies in the sequence (share of its duration)
     "tremor_mm": (0.0, 0.0),       # physiological tremor (8-12 Hz) added to every motion but idle, which has its own
     "forearm_deg": (60.0, 90.0),   # forearm out of the palm plane, away from the radar (0: in it; 90: along the sight)
+    "elbow_out_deg": (30.0, 60.0), # the arm turned about the vertical toward the hand's own side (a right elbow to the right)
     "wrist_share": (0.0, 0.4),     # share of a swipe's angle turned at the wrist (the rest at the elbow)
     "turns": (1.5, 1.5),           # a circle's turns
 }
@@ -89,6 +90,7 @@ class MotionDraw:
     onset: float = 0.5
     tremor_mm: float = 0.0
     forearm_deg: float = 75.0
+    elbow_out_deg: float = 0.0
     wrist_share: float = 0.0
     turns: float = 1.5
 
@@ -161,13 +163,14 @@ def hand_pose(draw: MotionDraw, hand: str = "right") -> tuple[np.ndarray, np.nda
 
 
 def arm_pose(draw: MotionDraw, wrist: np.ndarray, sight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rest elbow and shoulder (3,) each of a hand whose wrist is at ``wrist``, ``sight`` the unit vector radar -> hand:
-    the forearm points away from the fingers (-y) tilted ``forearm_deg`` toward +sight, the upper arm on from the elbow
-    along +sight raised ``UPPER_ARM_DEG`` toward +y."""
-    phi, psi = np.deg2rad(draw.forearm_deg), np.deg2rad(UPPER_ARM_DEG)
+    """Rest elbow and shoulder (3,) each of a right hand whose wrist is at ``wrist``, ``sight`` the unit vector radar ->
+    hand: the forearm points away from the fingers (-y) tilted ``forearm_deg`` toward +sight, the upper arm on from the
+    elbow along +sight raised ``UPPER_ARM_DEG`` toward +y; both turned ``elbow_out_deg`` about y toward +x."""
+    phi, psi, beta = np.deg2rad(draw.forearm_deg), np.deg2rad(UPPER_ARM_DEG), np.deg2rad(draw.elbow_out_deg)
     up = np.array([0.0, 1.0, 0.0])
-    elbow = wrist + FOREARM_M * draw.hand_scale * (-np.cos(phi) * up + np.sin(phi) * sight)
-    return elbow, elbow + UPPER_ARM_M * draw.hand_scale * (np.cos(psi) * sight + np.sin(psi) * up)
+    back = np.cos(beta) * sight + np.sin(beta) * np.cross(up, sight)  # away from the radar, turned toward the side
+    elbow = wrist + FOREARM_M * draw.hand_scale * (-np.cos(phi) * up + np.sin(phi) * back)
+    return elbow, elbow + UPPER_ARM_M * draw.hand_scale * (np.cos(psi) * back + np.sin(psi) * up)
 
 
 def elbow_ik(wrist: np.ndarray, shoulder: np.ndarray, upper_m: float, fore_m: float, pole: np.ndarray) -> np.ndarray:

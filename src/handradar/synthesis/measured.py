@@ -42,7 +42,7 @@ import torch
 from handradar.atomic import atomic_path
 from handradar.data.measured import PROCESSING, RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
 from handradar.data.unknowns import UNKNOWN, UNKNOWNS
-from handradar.hand.motions import MOTIONS_VERSION
+from handradar.hand.motions import DEFAULT_RANGES, MOTIONS_VERSION
 from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig, power_to_unit
@@ -180,8 +180,9 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     m, shape = measured_manifest(real_path)
     radar = synthesis_radar(m, shape, values)
     chain = dataset_chain(m, shape, radar.n_loops, values)
+    ranges = {**DEFAULT_RANGES, **m.motion_ranges}  # the defaults too: a changed default changes the rows
     source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
-              "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in m.motion_ranges.items()},
+              "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in ranges.items()},
               "class_ranges": {c: {k: list(v) for k, v in r.items()} for c, r in m.class_ranges.items()}}
     simulated = simulation_chain(chain)
     # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
