@@ -5,7 +5,7 @@ frames, frame-based Doppler), ``HANDRADAR_BENCH_MEASURED_PER_CLASS`` rows per cl
 motions drawn as the measured job draws them, the paper's model with no RadarWeightNet, cold: skeleton generation,
 the reflection points' signals summed window by window (nothing cached), the chain, and the finishing steps
 (handradar.synthesis.measured.finish_rows). Unknowns at the values the measured runs use (docs/findings.md): v_max
-1.5 m/s, 50 ms a column, 32 chirps a frame (2048 chirps a row). Processing set-ups (docs/datasets.md#processing):
+2.0 m/s, 35 ms a column, 64 chirps a frame (4096 chirps a row); the motions with their arm. Processing set-ups (docs/datasets.md#processing):
 Xia et al.'s manifest as it is; an MTI canceller, the central 64 of a 128-bin Doppler FFT and the strongest range
 bin; linear magnitude scaled per frame with a CA-CFAR. Needs no measured data. Target (issues 54, 62): >= 50
 rows/s on 2 cores for each.
@@ -26,7 +26,7 @@ from benchmarks.common import Result
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import dataset_chain, read_manifest
 from handradar.provenance import REPO_ROOT
-from handradar.synthesis.measured import finish_rows, simulation_chain, synthesis_radar
+from handradar.synthesis.measured import finish_rows, motion_source, simulation_chain, synthesis_radar
 from handradar.synthesis.providers import synthesize_source
 
 SETUPS = {
@@ -45,14 +45,12 @@ def run() -> list[Result]:
     with tempfile.TemporaryDirectory() as tmp:
         xia = read_manifest(REPO_ROOT / "conf" / "manifests" / "xia2021.yaml", root=tmp)  # the classes, not the data
         shape = (64, 64)
-        values = {"v_max_m_s": 1.5, "frame_period_s": 0.05, "chirps_per_frame": 32, "dynamic_range_db": 40.0}
+        values = {"v_max_m_s": 2.0, "frame_period_s": 0.035, "chirps_per_frame": 64, "dynamic_range_db": 60.0}
         for name, steps in SETUPS.items():
             m = dataclasses.replace(xia, processing={**xia.processing, **steps})
             radar = synthesis_radar(m, shape, values)
             chain = dataset_chain(m, shape, radar.n_loops, values)
-            source = {"name": "motions", "classes": m.classes, "per_class": per_class, "seed": 0,
-                      "duration_s": shape[1] * radar.frame_period_s,
-                      "ranges": {k: list(v) for k, v in m.motion_ranges.items()}}
+            source = motion_source(m, per_class, 0, shape[1] * radar.frame_period_s)
             f = Path(tmp) / f"synth-{len(out)}.h5"
             t0 = time.perf_counter()
             synthesize_source(source, f, radar=radar, chain=simulation_chain(chain), cache_dir=Path(tmp) / "cache",

@@ -24,6 +24,7 @@ from handradar.errors import FormatError
 from handradar.provenance import REPO_ROOT
 
 CHANNELS = ("VATI", "RTI", "HATI")
+ZERO_BAND = 3  # rows either side of zero Doppler left out of the sides' energy (the band a trembling hand leaves)
 COLUMNS = (10, 20, 28, 36, 44, 54)
 
 
@@ -43,15 +44,23 @@ def dominant_cycles(images: np.ndarray, most: int = 8) -> np.ndarray:
     return np.argmax(spectrum[:, 1:most + 1], axis=1) + 1
 
 
+def low_side_share(dti: np.ndarray, zero_row: int, band: int = ZERO_BAND) -> float:
+    """Of a (Doppler rows, columns) image's energy above its median (the background) more than ``band`` rows from
+    ``zero_row``, the share on the low-index side."""
+    e = np.clip(dti - np.median(dti), 0.0, None)
+    low, high = e[:max(zero_row - band, 0)].sum(), e[zero_row + band + 1:].sum()
+    return float(low / max(low + high, 1e-12))
+
+
 def channel_rows(manifest: str | Path, root: str | Path | None = None, split: str = "train") -> dict[str, dict]:
-    """{class: {channel: (n, rows, columns) images}} of ``split``'s rows in every channel of :data:`CHANNELS`."""
+    """{class: {channel: (n, rows, columns) images}} of ``split``'s rows: the DTI and every channel of :data:`CHANNELS`."""
     m = read_manifest(manifest, root)
     if "/DTI/" not in m.layout:
         raise FormatError(m.path, "rows.layout has no /DTI/ folder to swap for another channel")
     out: dict[str, dict] = {}
     for cls in m.classes:
         out[cls] = {}
-        for channel in CHANNELS:
+        for channel in ("DTI", *CHANNELS):
             other = type(m)(**{**m.__dict__, "layout": m.layout.replace("/DTI/", f"/{channel}/")})
             folder, _, files = class_files(other, m.splits[split], cls)
             if not files:
@@ -93,6 +102,13 @@ def main(argv: list[str]) -> int:
             top = np.argsort(counts)[::-1][:2]
             cells.append(", ".join(f"{k} ({counts[k] / counts.sum():.0%})" for k in top if counts[k]))
         print(f"| {cls} | " + " | ".join(cells) + " |")
+    m = read_manifest(args.manifest, args.root)
+    zero = int(round(m.zero_doppler if m.zero_doppler is not None else rows[next(iter(rows))]["DTI"].shape[1] // 2))
+    print(f"\nshare of each class-mean DTI's energy on its low rows (more than {ZERO_BAND} rows from zero Doppler, row {zero})")
+    print("| class | low-side share |")
+    print("|---|---|")
+    for cls, images in rows.items():
+        print(f"| {cls} | {low_side_share(images['DTI'].mean(axis=0), zero):.2f} |")
     return 0
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
-from experiments.xia_channels import CHANNELS, channel_means, dominant_cycles, main, row_centroids
+from experiments.xia_channels import CHANNELS, channel_means, dominant_cycles, low_side_share, main, row_centroids
 
 
 def test_row_centroid_closed_form():
@@ -24,6 +24,15 @@ def test_dominant_cycles_closed_form():
         images[i, np.round(20 + 8 * np.sin(2 * np.pi * n * cols / 64)).astype(int), cols] = 1.0
     images[3, 30 - cols // 4, cols] = 1.0
     assert dominant_cycles(images).tolist() == [1, 2, 3, 1]
+
+
+def test_low_side_share_closed_form():
+    """Energy above the background: 3 units on row 5 and 1 on row 25, none counted in the band around row 15."""
+    image = np.full((32, 10), 0.5)
+    image[5, :4] += 3.0
+    image[25, :4] += 1.0
+    image[14:17, :] += 9.0  # the zero band
+    assert low_side_share(image, 15) == pytest.approx(0.75)
 
 
 def test_channels_beside_the_dti_rows(tmp_path, capsys):

@@ -133,11 +133,14 @@ def markdown(report: dict) -> str:
 
 def write_unpaired_gap(real_x: np.ndarray, real_y: np.ndarray, synth_x: np.ndarray, synth_y: np.ndarray,
                        classes: Sequence[str], out_dir: str | Path,
-                       alternatives: Mapping[str, np.ndarray] | None = None) -> list[Path]:
-    """``unpaired_gap.json``, ``unpaired_gap.md`` and ``figures/class_means.png`` in ``out_dir``."""
+                       alternatives: Mapping[str, np.ndarray] | None = None, approaching: str = "high") -> list[Path]:
+    """``unpaired_gap.json``, ``unpaired_gap.md`` and ``figures/class_means.png`` in ``out_dir``; ``approaching``:
+    which end of the rows' Doppler axis approaches (the figure draws the high rows up and says which that is)."""
     out_dir = Path(out_dir)
     report = unpaired_gap(real_x, real_y, synth_x, synth_y, classes, alternatives)
     atomic_write_text(out_dir / "unpaired_gap.json", json.dumps(report, indent=1))
     atomic_write_text(out_dir / "unpaired_gap.md", markdown(report))
-    png = plot_class_means(real_x, real_y, synth_x, synth_y, classes, out_dir / "figures" / "class_means.png")
+    up = "approaching" if approaching == "high" else "receding (the dataset's approaching end is low)"
+    png = plot_class_means(real_x, real_y, synth_x, synth_y, classes, out_dir / "figures" / "class_means.png",
+                           title=f"measured vs synthetic, per class (Doppler up: {up}; time right)")
     return [out_dir / "unpaired_gap.json", out_dir / "unpaired_gap.md", png]

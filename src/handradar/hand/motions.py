@@ -10,17 +10,18 @@ procedural program on the open standard hand (:func:`handradar.hand.retarget.sta
 - ``push`` / ``pull``: the hand translates toward / away from the radar along the line of sight;
 - ``tap`` / ``double_tap``: the index finger flexes toward the radar and back, once or twice;
 - ``pinch``: thumb and index tips close and open again;
-- ``circle_cw`` / ``circle_ccw``: the hand circles ``turns`` turns (1.5 unless drawn otherwise) in the plane holding the line of sight
-  and x, clockwise or counter-clockwise with x to the right and the line of sight up;
+- ``circle_cw`` / ``circle_ccw``: the hand circles ``turns`` turns (1.5 unless drawn otherwise) in the plane
+  holding the line of sight and x, clockwise or counter-clockwise with x to the right and the line of sight up;
 - ``idle``: the hand holds still with a physiological tremor (about 1 mm, 8-12 Hz); any other motion
   may carry one too (``tremor_mm``);
 - ``random``: a smooth random wander of a few centimetres (non-gesture hand movement).
 
 Every motion carries its arm (``HandSequence.arm``: elbow and shoulder at every step): the forearm
 leaves the wrist away from the fingers, tilted ``forearm_deg`` out of the palm plane away from the
-radar; the upper arm runs on to a shoulder fixed for the sequence. A swipe turns the forearm about
-the fixed elbow, so its points move from zero at the elbow to the hand's speed at the wrist, and an
-arc across the beam is lopsided: the part of the hand's path along the forearm's tilt is radial. Any
+radar and turned ``elbow_out_deg`` toward the hand's own side; the upper arm runs on to a shoulder
+fixed for the sequence. A swipe turns the forearm about the fixed elbow, so its points move from zero
+at the elbow to the hand's speed at the wrist, and an arc across the beam is lopsided: the part of the
+hand's path along the forearm's tilt and turn is radial. Any
 other motion moves the hand and the elbow follows it by two-link inverse kinematics
 (:func:`elbow_ik`), the shoulder held.
 
@@ -58,7 +59,7 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "onset": (0.3, 0.7),           # where the motion's middle lies in the sequence (share of its duration)
     "tremor_mm": (0.0, 0.0),       # physiological tremor (8-12 Hz) added to every motion but idle, which has its own
     "forearm_deg": (60.0, 90.0),   # forearm out of the palm plane, away from the radar (0: in it; 90: along the sight)
-    "elbow_out_deg": (30.0, 60.0), # the arm turned about the vertical toward the hand's own side (a right elbow to the right)
+    "elbow_out_deg": (30.0, 60.0), # the arm turned about the vertical toward the hand's side (chosen on validation)
     "wrist_share": (0.0, 0.4),     # share of a swipe's angle turned at the wrist (the rest at the elbow)
     "turns": (1.5, 1.5),           # a circle's turns
 }
@@ -162,11 +163,13 @@ def hand_pose(draw: MotionDraw, hand: str = "right") -> tuple[np.ndarray, np.nda
     return j, centre
 
 
-def arm_pose(draw: MotionDraw, wrist: np.ndarray, sight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rest elbow and shoulder (3,) each of a right hand whose wrist is at ``wrist``, ``sight`` the unit vector radar ->
-    hand: the forearm points away from the fingers (-y) tilted ``forearm_deg`` toward +sight, the upper arm on from the
-    elbow along +sight raised ``UPPER_ARM_DEG`` toward +y; both turned ``elbow_out_deg`` about y toward +x."""
-    phi, psi, beta = np.deg2rad(draw.forearm_deg), np.deg2rad(UPPER_ARM_DEG), np.deg2rad(draw.elbow_out_deg)
+def arm_pose(draw: MotionDraw, wrist: np.ndarray, sight: np.ndarray, hand: str = "right") -> tuple[np.ndarray, np.ndarray]:
+    """Rest elbow and shoulder (3,) each of a hand whose wrist is at ``wrist``, ``sight`` the unit vector radar -> hand:
+    the forearm points away from the fingers (-y) tilted ``forearm_deg`` toward +sight, the upper arm on from the
+    elbow along +sight raised ``UPPER_ARM_DEG`` toward +y; both turned ``elbow_out_deg`` about y toward the hand's
+    side (+x for a right hand, -x for a left one)."""
+    side = 1.0 if hand == "right" else -1.0
+    phi, psi, beta = np.deg2rad(draw.forearm_deg), np.deg2rad(UPPER_ARM_DEG), side * np.deg2rad(draw.elbow_out_deg)
     up = np.array([0.0, 1.0, 0.0])
     back = np.cos(beta) * sight + np.sin(beta) * np.cross(up, sight)  # away from the radar, turned toward the side
     elbow = wrist + FOREARM_M * draw.hand_scale * (-np.cos(phi) * up + np.sin(phi) * back)
@@ -196,17 +199,15 @@ def _swing(joints: np.ndarray, elbow: np.ndarray, axis: np.ndarray, angle: np.nd
 
 
 def _swipe_angle(pose: np.ndarray, elbow: np.ndarray, axis: np.ndarray, wrist_share: float, chord_m: float) -> float:
-    """The swing angle (radians) that carries the hand centre (wrist and MCPs) ``chord_m`` from start to end."""
-    def chord(angle: float) -> float:
-        ends = _swing(np.stack([pose, pose]), elbow, axis, np.array([-angle / 2, angle / 2]), wrist_share)
-        return float(np.linalg.norm(np.diff(ends[:, list(CENTRE)].mean(axis=1), axis=0)))
-    lo, hi = 0.0, np.pi
-    if chord(hi) <= chord_m:
-        return hi
-    for _ in range(40):  # the chord grows with the angle up to half a turn
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if chord(mid) < chord_m else (lo, mid)
-    return 0.5 * (lo + hi)
+    """The swing angle (radians, at most half a turn) that carries the hand centre (wrist and MCPs) ``chord_m`` from
+    start to end: the chord on a grid of 1,025 angles at once, interpolated (it grows with the angle up to half a
+    turn; the grid's step of 3 mrad puts the chord within a micrometre)."""
+    angles = np.linspace(0.0, np.pi, 1025)
+    centre = pose[list(CENTRE)]  # the wrist first: _swing turns the hand about it
+    ends = _swing(np.broadcast_to(centre, (2 * len(angles), *centre.shape)), elbow, axis,
+                  np.concatenate([-angles / 2, angles / 2]), wrist_share).mean(axis=1)
+    chords = np.linalg.norm(ends[len(angles):] - ends[:len(angles)], axis=-1)
+    return float(np.interp(chord_m, chords, angles)) if chord_m < chords[-1] else float(np.pi)
 
 
 def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rate_hz: float = 100.0,
@@ -223,7 +224,7 @@ def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rat
     pose, centre = hand_pose(draw, hand)
     pose = pose + centre
     sight = centre / np.linalg.norm(centre)  # unit vector radar -> hand
-    elbow0, shoulder = arm_pose(draw, pose[0], sight)
+    elbow0, shoulder = arm_pose(draw, pose[0], sight, hand)
     joints = np.broadcast_to(pose, (len(t), N_JOINTS, 3)).copy()
     offset = np.zeros((len(t), 3))
     elbow = None  # None: the elbow follows the wrist (elbow_ik)

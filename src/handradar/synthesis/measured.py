@@ -171,6 +171,15 @@ def simulation_chain(chain: ChainConfig) -> ChainConfig:
                    cfar=None, threshold=None)
 
 
+def motion_source(m: Manifest, per_class: int, seed: int, duration_s: float) -> dict:
+    """The motion library's source config for a manifest's classes: its motion ranges over the defaults (held in full,
+    so that a changed default changes the cache key) and each class's own ranges."""
+    ranges = {**DEFAULT_RANGES, **m.motion_ranges}
+    return {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
+            "duration_s": float(duration_s), "ranges": {k: list(v) for k, v in ranges.items()},
+            "class_ranges": {c: {k: list(v) for k, v in r.items()} for c, r in m.class_ranges.items()}}
+
+
 def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str | None], *, per_class: int, seed: int,
                         cache_dir: str | Path, sim: Mapping | None = None, finish: bool = True) -> Path:
     """Synthetic rows of a measured dataset's classes, cached by everything that makes them. ``values`` holds the
@@ -180,10 +189,7 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     m, shape = measured_manifest(real_path)
     radar = synthesis_radar(m, shape, values)
     chain = dataset_chain(m, shape, radar.n_loops, values)
-    ranges = {**DEFAULT_RANGES, **m.motion_ranges}  # the defaults too: a changed default changes the rows
-    source = {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
-              "duration_s": shape[1] * radar.frame_period_s, "ranges": {k: list(v) for k, v in ranges.items()},
-              "class_ranges": {c: {k: list(v) for k, v in r.items()} for c, r in m.class_ranges.items()}}
+    source = motion_source(m, per_class, seed, shape[1] * radar.frame_period_s)
     simulated = simulation_chain(chain)
     # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
     key = config_hash(source, radar, simulated, dict(sim or {}), 'measured/2', MOTIONS_VERSION)

@@ -240,7 +240,7 @@ def synthetic_rows(job: Job, setup: MeasuredSetup, rows: MeasuredRows) -> Path:
         simulated = load_arrays(synthesize_measured(real.path, values, **made, finish=False)).x
         steps = one_step_rows(simulated, values, job.seed, dataset_chain(m, shape, values=values))
         for f in write_unpaired_gap(real.x[rows.pool], real.y[rows.pool], synth.x, synth.y, real.classes, job.run_dir,
-                                    steps):
+                                    steps, approaching=str(values.get("approaching") or "high")):
             job.tracker.log_artifact(f, "unpaired_gap")
     return path
 
