@@ -40,7 +40,7 @@ Public API:
             surface, and slot 38 (palm, forearm, multipath) one more part
       compile_combine: torch.compile the weighted sum (see profiles.combine_slots)
       .forward(skeleton, mask, weights=None, *, times=None, visibility=None) -> (B, doppler, columns)
-      .slot_profiles(skeleton, mask, *, times=None, visibility=None) -> (B, 39, F, L, Ch, bins) complex
+      .slot_profiles(skeleton, mask, *, times=None, visibility=None, arm=None) -> (B, 39, F, L, Ch, bins) complex
             network-independent: cache these (sim.cache) and train RadarWeightNet on them
       .combine(slot_profiles, weights=None, *, times=None, active=None, scale=None) -> (B, F, L, Ch, bins)
             weights (B, T, 38) positive at the skeleton steps (slot = hand * 19 + bone),
@@ -53,8 +53,8 @@ Public API:
             spectrogram(combine(...), slot_power(...)): what every caller with slot profiles uses
       .summed_rows(skeletons, masks, *, times=None, arms=None) -> ((B, F, L, Ch, bins) complex, slot power | None)
       .render_rows(skeletons, masks, *, times=None, arms=None, batch_size=32, progress=False) -> (N, doppler, columns)
-            arms: (N, T, 2, 2, 3) elbows and shoulders of a source that has them (the motion library), for forearm
-            modelling only, window by window, with no slot-profile cache (synthesis without RadarWeightNet)
+            modelling only, window by window, with no slot-profile cache (synthesis without RadarWeightNet);
+            arms: (N, T, 2, 2, 3) elbows and shoulders where the source has them (the motion library), for forearm
       .effect(name) -> the Effect instance;  .effects: nn.ModuleList in pipeline order
       .key() -> dict of everything that determines the output (cache keys)
       .chirp_times (F, L, C) float64 buffer, seconds

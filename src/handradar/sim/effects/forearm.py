@@ -56,12 +56,13 @@ class Forearm(Effect):
     def apply_scatterers(self, scat, ctx):
         wrist = ctx.joints[..., 0, :]
         if ctx.arm is None:
-            return scat.cat(self._cylinder(wrist, fixed_elbow(ctx.joints, ctx.mask, self.value("length_m").to(wrist.dtype)), ctx))
-        return scat.cat(self._cylinder(wrist, ctx.arm[..., 0, :], ctx)).cat(
-            self._cylinder(ctx.arm[..., 0, :], ctx.arm[..., 1, :], ctx))
+            elbow = fixed_elbow(ctx.joints, ctx.mask, self.value("length_m").to(wrist.dtype))
+            return scat.cat(self._cylinder(wrist, elbow, ctx))
+        elbow, shoulder = ctx.arm[..., 0, :], ctx.arm[..., 1, :]
+        return scat.cat(self._cylinder(wrist, elbow, ctx)).cat(self._cylinder(elbow, shoulder, ctx))
 
     def _cylinder(self, start: torch.Tensor, end: torch.Tensor, ctx) -> Scatterers:
-        """``n_segments`` points a hand of a cylinder from ``start`` to ``end`` (B, T, 2, 3), unweighted."""
+        """``n_segments`` points per hand on a cylinder from ``start`` to ``end`` (B, T, 2, 3), unweighted."""
         axis = end - start
         k = (torch.arange(self.n_segments, device=start.device, dtype=start.dtype) + 0.5) / self.n_segments
         pos = start[..., None, :] + k[:, None] * axis[..., None, :]  # (B, T, 2, S, 3)
