@@ -43,8 +43,7 @@ import numpy as np
 from handradar.hand.retarget import standard_hand
 from handradar.hand.skeleton import N_JOINTS, HandSequence
 
-# Raised whenever a motion's kinematics change: the cache keys of rows synthesised from motions hold it
-# (2: the arm, swipes swung about the elbow, circles' turns drawn).
+# Raised whenever a motion's kinematics change (2: the arm, swipes swung about the elbow, circles' turns drawn).
 MOTIONS_VERSION = 2
 MOTIONS: tuple[str, ...] = ("swipe_left", "swipe_right", "swipe_up", "swipe_down", "push", "pull", "tap",
                             "double_tap", "pinch", "circle_cw", "circle_ccw", "idle", "random")
@@ -77,6 +76,12 @@ UPPER_ARM_DEG = 60.0    # the upper arm runs from the elbow away from the radar,
 INDEX = (5, 6, 7, 8)    # MCP, PIP, DIP, tip
 CENTRE = (0, 5, 9, 13, 17)  # the hand centre: wrist and finger MCPs
 THUMB = (1, 2, 3, 4)
+
+
+def library_key() -> dict:
+    """What makes the library's sequences besides a source's own settings: its version and default draws. Cache keys of
+    rows synthesised from motions hold it, so that a changed default or motion never reuses stale rows."""
+    return {"version": MOTIONS_VERSION, "defaults": {k: list(v) for k, v in DEFAULT_RANGES.items()}}
 
 
 @dataclass(frozen=True)

@@ -106,10 +106,10 @@ class HandSequence:
     def resample(self, times: np.ndarray) -> HandSequence:
         """Linear interpolation in time to ``times`` (seconds); a hand counts as tracked at t only
         if it is tracked at both neighbouring samples. Times outside the sequence are clamped."""
-        times = np.asarray(times, dtype=np.float64)
-        arm = None if self.arm is None else interpolate(self.arm, self.times, self.mask, times)[0]
-        return HandSequence(*interpolate(self.positions, self.times, self.mask, times), source=self.source,
-                            attrs=dict(self.attrs), arm=arm)
+        joints = self.positions if self.arm is None else np.concatenate([self.positions, self.arm], axis=2)
+        pos, new_times, mask = interpolate(joints, self.times, self.mask, np.asarray(times, dtype=np.float64))
+        return HandSequence(pos[:, :, :N_JOINTS], new_times, mask, source=self.source, attrs=dict(self.attrs),
+                            arm=None if self.arm is None else pos[:, :, N_JOINTS:])
 
     def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> HandSequence:
         """Rigid transform x -> R x + t of every tracked joint."""

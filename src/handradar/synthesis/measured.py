@@ -42,7 +42,7 @@ import torch
 from handradar.atomic import atomic_path
 from handradar.data.measured import PROCESSING, RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
 from handradar.data.unknowns import UNKNOWN, UNKNOWNS
-from handradar.hand.motions import DEFAULT_RANGES, MOTIONS_VERSION
+from handradar.hand.motions import library_key
 from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig, power_to_unit
@@ -172,11 +172,9 @@ def simulation_chain(chain: ChainConfig) -> ChainConfig:
 
 
 def motion_source(m: Manifest, per_class: int, seed: int, duration_s: float) -> dict:
-    """The motion library's source config for a manifest's classes: its motion ranges over the defaults (held in full,
-    so that a changed default changes the cache key) and each class's own ranges."""
-    ranges = {**DEFAULT_RANGES, **m.motion_ranges}
+    """The motion library's source config for a manifest's classes: its motion ranges and each class's own ranges."""
     return {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
-            "duration_s": float(duration_s), "ranges": {k: list(v) for k, v in ranges.items()},
+            "duration_s": float(duration_s), "ranges": {k: list(v) for k, v in m.motion_ranges.items()},
             "class_ranges": {c: {k: list(v) for k, v in r.items()} for c, r in m.class_ranges.items()}}
 
 
@@ -192,7 +190,7 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     source = motion_source(m, per_class, seed, shape[1] * radar.frame_period_s)
     simulated = simulation_chain(chain)
     # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
-    key = config_hash(source, radar, simulated, dict(sim or {}), 'measured/2', MOTIONS_VERSION)
+    key = config_hash(source, radar, simulated, dict(sim or {}), 'measured/2', library_key())
     out = Path(cache_dir) / f"measured-synth-{key}.h5"
     if not out.is_file():
         log.info("synthesising %d rows per class of %d classes (v_max %.2f m/s, %.1f ms per column, %d chirps a frame)",

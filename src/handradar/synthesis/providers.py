@@ -57,7 +57,7 @@ from handradar.data.hdf5 import open_writer, read_attrs, read_meta_group, read_r
 from handradar.data.skeletons import iter_source, source_classes
 from handradar.errors import FormatError
 from handradar.hand.model import HandModelConfig
-from handradar.hand.motions import MOTIONS_VERSION
+from handradar.hand.motions import library_key
 from handradar.hand.skeleton import HandSequence
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig
@@ -291,8 +291,8 @@ def synthesize_external(source_cfg: Any, *, seed: int, cache_dir: str | Path, ra
     name, root, options = source_options(source_cfg)
     simulator = simulator_for(sim, radar, chain)
     # external/2: without weights rendered by Simulator.render_rows (no float16 slot-profile cache in between)
-    version = [MOTIONS_VERSION] if name == "motions" else []  # the motion library's kinematics make its rows
-    key = config_hash(name, str(Path(root).resolve()), options, simulator.key(), str(weights), "external/2", *version)
+    library = [library_key()] if name == "motions" else []  # the motion library's kinematics make its rows
+    key = config_hash(name, str(Path(root).resolve()), options, simulator.key(), str(weights), "external/2", *library)
     out = Path(cache_dir) / f"external-{name}-{key}.h5"
     if not out.is_file():
         synthesize_source(source_cfg, out, radar=radar, chain=chain, sim=simulator, weights=weights,

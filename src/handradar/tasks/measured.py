@@ -49,7 +49,7 @@ from handradar.data.datamodule import FileRows
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import dataset_chain, measured_manifest
 from handradar.data.unknowns import UNKNOWN, UNKNOWNS
-from handradar.hand.motions import DEFAULT_RANGES, MOTIONS_VERSION
+from handradar.hand.motions import library_key
 from handradar.data.splits import measured_split
 from handradar.errors import FormatError
 from handradar.gap.unpaired import write_unpaired_gap
@@ -192,7 +192,7 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     sim = OmegaConf.to_container(job.cfg.sim, resolve=True)
     processing = dataset_chain(m, shape)  # the steps the manifest states; the fit's values go over them
     key = config_hash(grid, fit, sim, processing, job.real.path.name, x.shape, float(x.sum(dtype=np.float64)),
-                      labels.tolist(), MOTIONS_VERSION, DEFAULT_RANGES)
+                      labels.tolist(), library_key())
     out = Path(job.cfg.synth.cache_dir) / f"measured-fit-{key}.json"
     if out.is_file():
         result = json.loads(out.read_text())
