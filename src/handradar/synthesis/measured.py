@@ -41,8 +41,8 @@ import torch
 
 from handradar.atomic import atomic_path
 from handradar.data.measured import PROCESSING, RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
-from handradar.data.unknowns import UNKNOWN, UNKNOWNS
-from handradar.hand.motions import library_key
+from handradar.data.unknowns import MOTION, UNKNOWN, UNKNOWNS
+from handradar.hand.motions import DEFAULT_RANGES, library_key
 from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig, power_to_unit
@@ -52,6 +52,7 @@ from handradar.synthesis.providers import synthesize_source
 log = logging.getLogger(__name__)
 
 DEEP_FLOOR_DB = 60.0  # the floor rows are synthesised at before the fit re-floors them
+PRIOR_KEPT_BELOW = 0.975  # a motion unknown leaves its prior only when its best beats it in this share of resamples
 OBJECTIVES = {  # what fit_unknowns compares, 1 - SSIM averaged over its images
     "means": "1 - SSIM of class-mean images, mean over classes",
     "moments": "1 - SSIM of class-mean and class-spread images, mean over both and over classes",
@@ -79,7 +80,7 @@ def noisy_power(x: np.ndarray, noise_db: float | None, rng: np.random.Generator,
     return power + 10.0 ** (noise_db / 10.0) * rng.gamma(float(int(looks)), 1.0 / int(looks), size=x.shape)
 
 
-FINISHED = tuple(k for k, u in UNKNOWNS.items() if not u.simulated)  # what finish_rows applies
+FINISHED = tuple(k for k, u in UNKNOWNS.items() if u.stage == "finish")  # what finish_rows applies
 SCALING = {**{k: PROCESSING[k] for k in ("scale", "quantity", "normalise")}, "dynamic_range_db": None}  # defaults
 
 
@@ -171,23 +172,43 @@ def simulation_chain(chain: ChainConfig) -> ChainConfig:
                    cfar=None, threshold=None)
 
 
-def motion_source(m: Manifest, per_class: int, seed: int, duration_s: float) -> dict:
-    """The motion library's source config for a manifest's classes: its motion ranges and each class's own ranges."""
+def motion_ranges(m: Manifest, values: Mapping[str, object] | None = None) -> tuple[dict, dict]:
+    """The draw ranges of a manifest's motions, (shared, by class): its ``motion_ranges`` (the prior; the library's
+    DEFAULT_RANGES where it states none) and each class's own, moved by ``values``' motion unknowns
+    (handradar.data.unknowns.MOTION); a value that keeps its prior moves nothing, so a cache key stays as it was."""
+    shared = {k: tuple(v) for k, v in m.motion_ranges.items()}
+    by_class = {c: {k: tuple(v) for k, v in r.items()} for c, r in m.class_ranges.items()}
+    for name in MOTION:
+        u, value = UNKNOWNS[name], (values or {}).get(name)
+        if value is None or float(value) == u.identity:
+            continue
+        shared[u.motion] = u.moved(shared.get(u.motion, DEFAULT_RANGES[u.motion]), float(value))
+        for r in by_class.values():
+            if u.motion in r:
+                r[u.motion] = u.moved(r[u.motion], float(value))
+    return shared, by_class
+
+
+def motion_source(m: Manifest, per_class: int, seed: int, duration_s: float,
+                  values: Mapping[str, object] | None = None) -> dict:
+    """The motion library's source config for a manifest's classes: the draw ranges of :func:`motion_ranges`."""
+    shared, by_class = motion_ranges(m, values)
     return {"name": "motions", "classes": m.classes, "per_class": int(per_class), "seed": int(seed),
-            "duration_s": float(duration_s), "ranges": {k: list(v) for k, v in m.motion_ranges.items()},
-            "class_ranges": {c: {k: list(v) for k, v in r.items()} for c, r in m.class_ranges.items()}}
+            "duration_s": float(duration_s), "ranges": {k: list(v) for k, v in shared.items()},
+            "class_ranges": {c: {k: list(v) for k, v in r.items()} for c, r in by_class.items()}}
 
 
 def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str | None], *, per_class: int, seed: int,
                         cache_dir: str | Path, sim: Mapping | None = None, finish: bool = True) -> Path:
     """Synthetic rows of a measured dataset's classes, cached by everything that makes them. ``values`` holds the
-    manifest's unknowns (handradar.data.unknowns): the simulated ones set the radar (:func:`synthesis_radar`), the
-    others finish the rows simulated at a deep floor (:func:`finish_rows`) with the dataset's processing; ``finish``
-    False: the rows as simulated (what the fit finishes candidate by candidate)."""
+    manifest's unknowns (handradar.data.unknowns): the radar ones set the radar (:func:`synthesis_radar`) and its
+    range handling, the motion ones the motions' draw ranges (:func:`motion_ranges`), the others finish the rows
+    simulated at a deep floor (:func:`finish_rows`) with the dataset's processing; ``finish`` False: the rows as
+    simulated (what the fit finishes candidate by candidate)."""
     m, shape = measured_manifest(real_path)
     radar = synthesis_radar(m, shape, values)
     chain = dataset_chain(m, shape, radar.n_loops, values)
-    source = motion_source(m, per_class, seed, shape[1] * radar.frame_period_s)
+    source = motion_source(m, per_class, seed, shape[1] * radar.frame_period_s, values)
     simulated = simulation_chain(chain)
     # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
     key = config_hash(source, radar, simulated, dict(sim or {}), 'measured/2', library_key())
@@ -238,18 +259,19 @@ class UnknownsFit:
     objective: str = "means"
     n_boot: int = 0                 # resamples behind shares and ranges; 0: the uncertainty could not be estimated
     edges: list[str] = field(default_factory=list)  # unknowns chosen at the edge of their grid (grid_edges)
+    kept: dict[str, dict] = field(default_factory=dict)  # motion unknown -> {best, wins}: its prior kept (PRIOR_KEPT_BELOW)
 
     @classmethod
     def from_dict(cls, d: Mapping) -> UnknownsFit:
         """The fit :meth:`as_dict` wrote (the cached ``measured-fit-<hash>.json``)."""
         return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows", "n_boot")},
                    objective=next(k for k, v in OBJECTIVES.items() if v == d.get("objective", OBJECTIVES["means"])),
-                   edges=list(d.get("edges", [])))
+                   edges=list(d.get("edges", [])), kept=dict(d.get("kept", {})))
 
     def as_dict(self) -> dict:
         return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
                 "n_rows": self.n_rows, "objective": OBJECTIVES[self.objective], "n_boot": self.n_boot,
-                "edges": self.edges}
+                "edges": self.edges, "kept": self.kept}
 
     def summary(self) -> str:
         parts = []
@@ -258,9 +280,14 @@ class UnknownsFit:
             if not self.n_boot:
                 parts.append(f"{k} {v}{edge}")
                 continue
+            if k not in self.shares:  # fixed: nothing was chosen
+                parts.append(f"{k} {v}")
+                continue
             share = self.shares[k].get(str(v), 0.0)
             rng = f" [{self.ranges[k][0]:g}, {self.ranges[k][1]:g}]" if k in self.ranges else ""
-            parts.append(f"{k} {v}{rng}{edge} (chosen by {share:.0%} of resamples)")
+            kept = (f", the prior kept: {self.kept[k]['best']:g} beat it in only {self.kept[k]['wins']:.0%}"
+                    if k in self.kept else "")
+            parts.append(f"{k} {v}{rng}{edge} (chosen by {share:.0%} of resamples{kept})")
         text = "; ".join(parts)
         if not self.n_boot:
             text += " (uncertainty not estimated: a class has fewer than 2 rows to resample)"
@@ -279,27 +306,34 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                  seed: int = 0, objective: str = "means", processing: ChainConfig | None = None) -> UnknownsFit:
     """Choose the unknowns whose synthetic class means (and spreads) are closest to the measured ones (module docstring).
 
-    simulate({simulated unknowns}) -> (x, y): synthetic rows as simulated (``DEEP_FLOOR_DB``, approaching high), None
-    where that radar is no candidate (a frame too short for its chirps). grid: candidates by unknown
+    simulate({radar and motion unknowns}) -> (x, y): synthetic rows as simulated (``DEEP_FLOOR_DB``, approaching high),
+    None where that radar is no candidate (a frame too short for its chirps). grid: candidates by unknown
     (handradar.data.unknowns.UNKNOWNS; a single-value list fixes one, an absent one is not fitted: None is passed
     to ``simulate``, or ``processing`` keeps its step); ``chirps_per_frame``, ``noise_db`` and ``noise_looks`` default
     to [None] (as many chirps as Doppler bins), [None] (no noise) and [1]. The rows of each candidate are finished
-    (:func:`finish_rows`) on ``processing``. The bootstrap re-ranks the ``boot_candidates`` best candidates of the
-    full fit; it is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has fewer than 2 rows, whose
-    every resample is the same rows. ``objective``: :data:`OBJECTIVES`.
+    (:func:`finish_rows`) on ``processing``. The radar and finish unknowns are searched over every combination, the
+    motions' draws at their prior (a motion unknown's identity, or its one candidate); then each motion unknown in
+    turn (grid order) over its candidates, at the chosen radar, finish and earlier motions: one pass of coordinate
+    search. The bootstrap re-ranks the ``boot_candidates`` best combinations, and each motion unknown's candidates; it
+    is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has fewer than 2 rows, whose every resample
+    is the same rows. A motion unknown leaves its prior only for a candidate that beats it in ``PRIOR_KEPT_BELOW`` of
+    the resamples (``kept`` in the result names those held back): a move the rows cannot tell from the synthetic rows'
+    own sampling is not made (docs/datasets.md#fitting-the-motions). ``objective``: :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
     unknown = sorted(set(grid) - set(UNKNOWNS))
     if unknown:
         raise ValueError(f"unknown fit grid entry {unknown[0]!r}; expected one of {list(UNKNOWNS)}")
     g = {k: list(grid.get(k) or optional[k]) for k in UNKNOWNS if grid.get(k) or k in optional}
-    simulated = [k for k in g if UNKNOWNS[k].simulated]
-    finished = [k for k in g if not UNKNOWNS[k].simulated]
+    radar_keys = [k for k in g if UNKNOWNS[k].stage == "radar"]
+    finished = [k for k in g if UNKNOWNS[k].stage == "finish"]
+    motions = {k: float(g[k][0]) if len(g[k]) == 1 else UNKNOWNS[k].identity
+               for k in g if UNKNOWNS[k].stage == "motion"}
     combos, synth_moments = [], []
-    for radar_values in itertools.product(*(g[k] for k in simulated)):
+    for radar_values in itertools.product(*(g[k] for k in radar_keys)):
         radar = {k: (v if v is None or not UNKNOWNS[k].numeric else int(v) if UNKNOWNS[k].kind == "count" else float(v))
-                 for k, v in zip(simulated, radar_values)}
-        made = simulate(radar)
+                 for k, v in zip(radar_keys, radar_values)}
+        made = simulate({**radar, **motions})
         if made is None:
             continue
         x, y = made
@@ -311,43 +345,64 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                 continue  # in dB a magnitude's image is its power's: one candidate
             values = {k: (int(v) if k == "noise_looks" else float(v) if isinstance(v, (int, float)) else v)
                       for k, v in values.items()}
-            combos.append(values)
+            combos.append({**values, **motions})
             synth_moments.append(class_moments(finish_rows(x, values, seed, processing), y, n_classes, objective))
     if not combos:
         raise ValueError("no candidate of the grid could be simulated")
-    synth_moments = np.stack(synth_moments)  # (combos, classes or 2 classes, doppler, columns)
-    names = list(g)
 
-    def objectives(real_moments: np.ndarray, which: np.ndarray) -> np.ndarray:
-        flat = np.broadcast_to(real_moments, synth_moments[which].shape).reshape(-1, *real_moments.shape[-2:])
-        s = per_example_ssim(flat, synth_moments[which].reshape(-1, *real_moments.shape[-2:])).reshape(len(which), -1)
+    def objectives(real_moments: np.ndarray, synth: np.ndarray) -> np.ndarray:
+        """The objective of each candidate's moments ``synth`` (candidates, images, doppler, columns)."""
+        flat = np.broadcast_to(real_moments, synth.shape).reshape(-1, *real_moments.shape[-2:])
+        s = per_example_ssim(flat, synth.reshape(-1, *real_moments.shape[-2:])).reshape(len(synth), -1)
         return 1.0 - s.mean(axis=1)
 
-    gaps = objectives(class_moments(real_x, real_y, n_classes, objective), np.arange(len(combos)))
-    best = int(np.argmin(gaps))
-    # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
-    # behind on all rows is not chosen by a resample of them
-    contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
-    rng = np.random.default_rng(seed)
     members = [np.flatnonzero(real_y == c) for c in range(n_classes)]
     if min(len(m) for m in members) < 2:
         n_boot = 0
-    chosen = []
-    for _ in range(n_boot):
-        rows = np.concatenate([rng.choice(m, size=len(m)) for m in members])
-        resampled = class_moments(real_x[rows], real_y[rows], n_classes, objective)
-        chosen.append(int(contenders[np.argmin(objectives(resampled, contenders))]))
-    shares: dict[str, dict] = {k: {} for k in names} if chosen else {}
-    for i in chosen:
-        for k in names:
-            key = str(combos[i][k])
-            shares[k][key] = shares[k].get(key, 0.0) + 1.0 / n_boot
-    ranges = {k: [float(np.percentile([combos[i][k] for i in chosen], q)) for q in (2.5, 97.5)]
-              for k in names if chosen and UNKNOWNS[k].numeric and all(combos[i][k] is not None for i in chosen)}
-    candidates = [{**c, "gap": float(g)} for c, g in zip(combos, gaps)]
-    values = dict(combos[best])
+    rng = np.random.default_rng(seed)
+    resamples = [class_moments(real_x[rows], real_y[rows], n_classes, objective) for rows in
+                 (np.concatenate([rng.choice(m, size=len(m)) for m in members]) for _ in range(n_boot))]
+    real_moments = class_moments(real_x, real_y, n_classes, objective)
+    synth_moments = np.stack(synth_moments)  # (combos, classes or 2 classes, doppler, columns)
+    gaps = objectives(real_moments, synth_moments)
+    values = dict(combos[int(np.argmin(gaps))])
+    # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
+    # behind on all rows is not chosen by a resample of them
+    contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
+    chosen = {k: [combos[contenders[np.argmin(objectives(r, synth_moments[contenders]))]][k] for r in resamples]
+              for k in g if UNKNOWNS[k].stage != "motion"}
+    candidates = [{**c, "gap": float(gap)} for c, gap in zip(combos, gaps)]
+    kept: dict[str, dict] = {}
+    for name in (k for k in motions if len(g[k]) > 1):
+        identity = UNKNOWNS[name].identity
+        tried, moments = [], []
+        for v in sorted(map(float, g[name]), key=lambda v: abs(v - identity)):  # ties: the candidate nearest the prior
+            made = simulate({**{k: values[k] for k in radar_keys}, **{k: values[k] for k in motions}, name: v})
+            if made is None:
+                continue
+            m = class_moments(finish_rows(made[0], values, seed, processing), made[1], n_classes, objective)
+            if not any(np.array_equal(m, earlier) for earlier in moments):  # a shift clipped at 0: the same draws
+                tried.append(v)
+                moments.append(m)
+        if not tried:
+            raise ValueError(f"no candidate of {name} could be simulated")
+        moments = np.stack(moments)
+        gaps = objectives(real_moments, moments)
+        best = int(np.argmin(gaps))
+        candidates += [{**values, name: v, "gap": float(gap)} for v, gap in zip(tried, gaps)]
+        boot = np.stack([objectives(r, moments) for r in resamples]) if resamples else np.zeros((0, len(tried)))
+        chosen[name] = [tried[i] for i in boot.argmin(axis=1)]
+        wins = float(np.mean(boot[:, best] < boot[:, 0])) if resamples else 1.0
+        if best and tried[0] == identity and wins < PRIOR_KEPT_BELOW:
+            kept[name] = {"best": tried[best], "wins": wins}
+            best = 0
+        values[name] = tried[best]
+    shares = {k: {str(v): c.count(v) / n_boot for v in dict.fromkeys(c)} for k, c in chosen.items()} if n_boot else {}
+    ranges = {k: [float(np.percentile(c, q)) for q in (2.5, 97.5)] for k, c in chosen.items()
+              if n_boot and UNKNOWNS[k].numeric and all(v is not None for v in c)}
     return UnknownsFit(values=values, candidates=candidates, shares=shares, ranges=ranges,
-                       n_rows=int(len(real_y)), objective=objective, n_boot=int(n_boot), edges=grid_edges(values, g))
+                       n_rows=int(len(real_y)), objective=objective, n_boot=int(n_boot), edges=grid_edges(values, g),
+                       kept=kept)
 
 
 def grid_edges(values: Mapping[str, object], grid: Mapping[str, Sequence]) -> list[str]:
