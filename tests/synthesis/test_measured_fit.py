@@ -12,13 +12,17 @@ import torch
 import yaml
 
 from handradar.data.datasets import load_arrays
-from handradar.data.measured import MeasuredDataset, dataset_chain, measured_manifest
+from handradar.data.measured import Manifest, MeasuredDataset, dataset_chain, measured_manifest
+from handradar.data.unknowns import MOTION, UNKNOWNS
+from handradar.hand.motions import DEFAULT_RANGES
 from handradar.radar.chain import ChainConfig, power_to_unit
 from handradar.synthesis.measured import (
     DEEP_FLOOR_DB,
+    PRIOR_KEPT_BELOW,
     finish_rows,
     fit_unknowns,
     mirror_doppler,
+    motion_ranges,
     UnknownsFit,
     synthesize_measured,
 )
@@ -65,11 +69,12 @@ def measured_stand_in(root: Path, n: int = 8, truth: dict | None = None, process
     return MeasuredDataset(root / "m.yaml", root / "cache").path()
 
 
-def simulated_rows(real_path: Path, cache: Path):
+def simulated_rows(real_path: Path, cache: Path, per_class: int = 8):
     """The fit's simulate callback on a stand-in: rows as simulated, None where the radar is no candidate."""
     def simulate(radar: dict):
         try:
-            d = load_arrays(synthesize_measured(real_path, radar, per_class=8, seed=0, cache_dir=cache, finish=False))
+            d = load_arrays(synthesize_measured(real_path, radar, per_class=per_class, seed=0, cache_dir=cache,
+                                                finish=False))
         except ValueError:
             return None
         return d.x, d.y
@@ -282,3 +287,57 @@ def test_one_row_per_class_has_no_bootstrap_uncertainty():
     assert UnknownsFit.from_dict(fit.as_dict()) == fit
     two = fit_unknowns(np.concatenate([real_x, real_x]), np.array([0, 1, 0, 1]), 2, simulate, grid, n_boot=30, seed=0)
     assert two.n_boot == 30 and "chosen by 100% of resamples" in two.summary()
+
+
+def test_motion_unknowns_move_the_prior_ranges():
+    """A motion unknown multiplies (factor) or shifts (shift) the manifest's range, else the library's default; the
+    class's own range of that field moves with it; a shift keeps tremor at or above 0; a value that keeps the prior
+    leaves the ranges (and so every cache key) as they were."""
+    m = Manifest(path=Path("m.yaml"), name="m", root=Path("."), layout="", splits={}, train="train", test=[],
+                 classes={"swipe": ["swipe_right"]}, folders={}, doppler_axis=0, approaching="unknown",
+                 zero_doppler=None, grid=None, values=None, radar={}, processing={},
+                 motion_ranges={"speed": (0.5, 1.0), "tremor_mm": (0.2, 1.0)},
+                 class_ranges={"swipe": {"speed": (0.8, 0.8), "turns": (2.0, 3.0)}})
+    assert motion_ranges(m, {k: UNKNOWNS[k].identity for k in MOTION}) == motion_ranges(m) == (
+        m.motion_ranges, m.class_ranges)
+    shared, by_class = motion_ranges(m, {"speed_factor": 1.5, "tremor_shift_mm": -0.5, "azimuth_shift_deg": 10.0,
+                                         "distance_factor": 0.5})
+    lo, hi = DEFAULT_RANGES["distance_m"]
+    assert shared == {"speed": (0.75, 1.5), "tremor_mm": (0.0, 0.5), "azimuth_deg": (-10.0, 30.0),
+                      "distance_m": (0.5 * lo, 0.5 * hi)}
+    assert by_class == {"swipe": {"speed": pytest.approx((1.2, 1.2)), "turns": (2.0, 3.0)}}
+
+
+@pytest.mark.parametrize("truth", [0.67, 1.5])
+def test_fit_recovers_the_motions_speed(tmp_path, truth):
+    """A stand-in whose hands move 1.5 times (or 0.67 times) as fast as the prior's, other draws than the fit's: the
+    label-free fit, radar known, moves the speed from its prior to the truth, every resample agreeing."""
+    real_path = measured_stand_in(tmp_path, n=16, truth={**TRUTH, "speed_factor": truth})
+    real = load_arrays(real_path)
+    rows = np.flatnonzero((real.meta["split"] == "train") & (real.x.max(axis=(1, 2)) > 0))
+    simulate = simulated_rows(real_path, tmp_path / "synth", per_class=16)
+    grid = {**{k: [v] for k, v in TRUTH.items()}, "speed_factor": list(UNKNOWNS["speed_factor"].grid)}
+    fit = fit_unknowns(real.x[rows], np.zeros(len(rows), np.int64), 1, lambda r: (lambda m: m and (m[0], 0 * m[1]))(
+        simulate(r)), grid, n_boot=50, seed=0)
+    assert fit.values["speed_factor"] == truth and fit.shares["speed_factor"][str(truth)] == 1.0 and not fit.kept
+    assert fit.edges == ["speed_factor"]  # 0.67 and 1.5 are the grid's edges: said so
+    assert len(fit.candidates) == 1 + 3  # the radar (fixed) at the prior, then the speed's three candidates
+
+
+def test_a_motion_the_rows_cannot_tell_keeps_its_prior(tmp_path):
+    """A stand-in drawn at the prior of every motion (other draws than the fit's): with all five motion unknowns
+    searched, class by class, none leaves its prior; where a candidate beat the prior on all rows but not in 97.5 %
+    of resamples the fit says so (``kept``: the synthetic rows' own sampling, not the truth)."""
+    real_path = measured_stand_in(tmp_path, n=16)
+    real = load_arrays(real_path)
+    rows = np.flatnonzero((real.meta["split"] == "train") & (real.x.max(axis=(1, 2)) > 0))
+    grid = {**{k: [v] for k, v in TRUTH.items()}, **{k: list(UNKNOWNS[k].grid) for k in MOTION}}
+    fit = fit_unknowns(real.x[rows], real.y[rows], len(CLASSES), simulated_rows(real_path, tmp_path / "synth", 16),
+                       grid, n_boot=50, seed=0)
+    assert {k: fit.values[k] for k in MOTION} == {k: UNKNOWNS[k].identity for k in MOTION}
+    # the radar at the prior, then 3 candidates each, but tremor's -0.5 mm clips to the prior's 0 mm: one candidate
+    assert len(fit.candidates) == 1 + 3 + 2 + 3 + 3 + 3
+    for k, held in fit.kept.items():
+        assert held["wins"] < PRIOR_KEPT_BELOW and f"{k} {UNKNOWNS[k].identity}" in fit.summary()
+        assert "the prior kept" in fit.summary()
+    assert UnknownsFit.from_dict(fit.as_dict()).kept == fit.kept

@@ -52,6 +52,7 @@ from handradar.synthesis.providers import synthesize_source
 log = logging.getLogger(__name__)
 
 DEEP_FLOOR_DB = 60.0  # the floor rows are synthesised at before the fit re-floors them
+FIT_VERSION = 2  # raised whenever fit_unknowns chooses otherwise (2: the motion unknowns): no stale cached fit
 PRIOR_KEPT_BELOW = 0.975  # a motion unknown leaves its prior only when its best beats it in this share of resamples
 OBJECTIVES = {  # what fit_unknowns compares, 1 - SSIM averaged over its images
     "means": "1 - SSIM of class-mean images, mean over classes",
@@ -316,9 +317,10 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     turn (grid order) over its candidates, at the chosen radar, finish and earlier motions: one pass of coordinate
     search. The bootstrap re-ranks the ``boot_candidates`` best combinations, and each motion unknown's candidates; it
     is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has fewer than 2 rows, whose every resample
-    is the same rows. A motion unknown leaves its prior only for a candidate that beats it in ``PRIOR_KEPT_BELOW`` of
-    the resamples (``kept`` in the result names those held back): a move the rows cannot tell from the synthetic rows'
-    own sampling is not made (docs/datasets.md#fitting-the-motions). ``objective``: :data:`OBJECTIVES`.
+    is the same rows; a motion unknown's resamples redraw its candidates' synthetic rows too. A motion unknown leaves its
+    prior only for a candidate that beats it in ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result names
+    those held back): a move the rows cannot tell from the synthetic rows' own sampling is not made
+    (docs/datasets.md#fitting-the-motions). ``objective``: :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
     unknown = sorted(set(grid) - set(UNKNOWNS))
@@ -352,7 +354,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
 
     def objectives(real_moments: np.ndarray, synth: np.ndarray) -> np.ndarray:
         """The objective of each candidate's moments ``synth`` (candidates, images, doppler, columns)."""
-        flat = np.broadcast_to(real_moments, synth.shape).reshape(-1, *real_moments.shape[-2:])
+        flat = np.broadcast_to(real_moments, synth.shape).reshape(-1, *real_moments.shape[-2:]).copy()
         s = per_example_ssim(flat, synth.reshape(-1, *real_moments.shape[-2:])).reshape(len(synth), -1)
         return 1.0 - s.mean(axis=1)
 
@@ -373,24 +375,32 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
               for k in g if UNKNOWNS[k].stage != "motion"}
     candidates = [{**c, "gap": float(gap)} for c, gap in zip(combos, gaps)]
     kept: dict[str, dict] = {}
+    synth_rng = np.random.default_rng([seed, 1])  # the synthetic rows' resamples: the measured ones' stay as they were
     for name in (k for k in motions if len(g[k]) > 1):
         identity = UNKNOWNS[name].identity
-        tried, moments = [], []
+        tried, rows = [], []
         for v in sorted(map(float, g[name]), key=lambda v: abs(v - identity)):  # ties: the candidate nearest the prior
             made = simulate({**{k: values[k] for k in radar_keys}, **{k: values[k] for k in motions}, name: v})
             if made is None:
                 continue
-            m = class_moments(finish_rows(made[0], values, seed, processing), made[1], n_classes, objective)
-            if not any(np.array_equal(m, earlier) for earlier in moments):  # a shift clipped at 0: the same draws
+            x = finish_rows(made[0], values, seed, processing)
+            if not any(np.array_equal(x, earlier) for earlier, _ in rows):  # a shift clipped at 0: the same draws
                 tried.append(v)
-                moments.append(m)
+                rows.append((x, np.asarray(made[1])))
         if not tried:
             raise ValueError(f"no candidate of {name} could be simulated")
-        moments = np.stack(moments)
-        gaps = objectives(real_moments, moments)
+        gaps = objectives(real_moments, np.stack([class_moments(x, y, n_classes, objective) for x, y in rows]))
         best = int(np.argmin(gaps))
         candidates += [{**values, name: v, "gap": float(gap)} for v, gap in zip(tried, gaps)]
-        boot = np.stack([objectives(r, moments) for r in resamples]) if resamples else np.zeros((0, len(tried)))
+        # each resample redraws the measured rows and, the same for every candidate (their draws are shared), the
+        # synthetic rows: a motion's candidates lie close, and the synthetic rows' own sampling moves their ranking
+        y = rows[0][1]
+        synth_members = [np.flatnonzero(y == c) for c in range(n_classes)]
+        boot = np.zeros((len(resamples), len(tried)))
+        for i, real_r in enumerate(resamples):
+            pick = np.concatenate([synth_rng.choice(m, size=len(m)) for m in synth_members])
+            boot[i] = objectives(real_r, np.stack([class_moments(x[pick], y[pick], n_classes, objective)
+                                                   for x, _ in rows]))
         chosen[name] = [tried[i] for i in boot.argmin(axis=1)]
         wins = float(np.mean(boot[:, best] < boot[:, 0])) if resamples else 1.0
         if best and tried[0] == identity and wins < PRIOR_KEPT_BELOW:

@@ -48,7 +48,7 @@ from handradar.atomic import atomic_path, atomic_write_text
 from handradar.data.datamodule import FileRows
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import dataset_chain, measured_manifest
-from handradar.data.unknowns import UNKNOWN, UNKNOWNS
+from handradar.data.unknowns import MOTION, UNKNOWN, UNKNOWNS
 from handradar.hand.motions import library_key
 from handradar.data.splits import measured_split
 from handradar.errors import FormatError
@@ -56,9 +56,11 @@ from handradar.gap.unpaired import write_unpaired_gap
 from handradar.models.classifiers import backbone_state
 from handradar.provenance import config_hash
 from handradar.synthesis.measured import (
+    FIT_VERSION,
     OBJECTIVES,
     UnknownsFit,
     fit_unknowns,
+    motion_ranges,
     one_step_rows,
     synthesize_measured,
 )
@@ -192,7 +194,7 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     sim = OmegaConf.to_container(job.cfg.sim, resolve=True)
     processing = dataset_chain(m, shape)  # the steps the manifest states; the fit's values go over them
     key = config_hash(grid, fit, sim, processing, job.real.path.name, x.shape, float(x.sum(dtype=np.float64)),
-                      labels.tolist(), library_key())
+                      labels.tolist(), library_key(), FIT_VERSION)
     out = Path(job.cfg.synth.cache_dir) / f"measured-fit-{key}.json"
     if out.is_file():
         result = json.loads(out.read_text())
@@ -204,7 +206,8 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
                 path = synthesize_measured(job.real.path, values, per_class=int(fit["per_class"]), seed=int(fit["seed"]),
                                            cache_dir=Path(job.cfg.synth.cache_dir), sim=sim, finish=False)
             except ValueError as exc:  # chirps that do not fit in the frame: no candidate
-                log.info("fit: %s skipped (%s)", ", ".join(f"{k} {v}" for k, v in values.items()), exc)
+                log.info("fit: %s skipped (%s)", ", ".join(f"{k} {v}" for k, v in values.items()
+                                                          if k not in MOTION or v != UNKNOWNS[k].identity), exc)
                 return None
             d = load_arrays(path)
             return d.x, np.zeros_like(d.y) if pooled else d.y
@@ -216,6 +219,10 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
         atomic_write_text(out, json.dumps(result, indent=1))
     summary = UnknownsFit.from_dict(result)
     (log.warning if summary.edges else log.info)("fitted: %s", summary.summary())
+    shared, _ = motion_ranges(m, result["values"])
+    moved = [UNKNOWNS[k].motion for k in MOTION if result["values"].get(k, UNKNOWNS[k].identity) != UNKNOWNS[k].identity]
+    if moved:
+        log.info("motions drawn from the fitted ranges: %s", ", ".join(f"{k} {shared[k][0]:g}-{shared[k][1]:g}" for k in moved))
     job.log_params({f"synth.fitted.{k}": v for k, v in result["values"].items()})
     job.tracker.log_artifact(out, "synthesis")
     return result["values"]
