@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from handradar.data.unknowns import MOTION, UNKNOWNS
 from handradar.tasks.measured import MeasuredRows, MeasuredSetup, label_budget
 from handradar.tasks.train import run
 from handradar.vocab import MEASURED_VARIANTS
@@ -102,6 +103,31 @@ def test_fit_keeps_the_labelled_budget(tmp_path, monkeypatch):
         run(cfg, tmp_path / f"run-{rows}")
     # 3 classes of 9 training rows, 2 of each for validation: a pool of 21 rows; K = 2: 6 labelled rows
     assert seen == [(21, [0], 1), (6, [0, 1, 2], 3)]
+
+
+def test_motions_are_fitted_only_when_asked(tmp_path, monkeypatch):
+    """By default the motion unknowns reach the fit at their prior alone (the manifest's motion_ranges as they are);
+    synth.measured.fit.motions=true hands it their grids; a set value is fixed either way."""
+    import handradar.tasks.measured as measured_job
+
+    grids = []
+
+    class Seen(Exception):
+        pass
+
+    def capture(x, y, n, simulate, grid, **kw):
+        grids.append(grid)
+        raise Seen  # the grid is all this test needs
+
+    monkeypatch.setattr(measured_job, "fit_unknowns", capture)
+    measured_stand_in(tmp_path / "data")
+    for extra in ([], ["synth.measured.fit.motions=true", "synth.measured.unknowns.hand_size_factor=1.15"]):
+        cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", "split.per_class=0", *extra))
+        with pytest.raises(Seen):
+            run(cfg, tmp_path / f"run-{len(extra)}")
+    assert {k: grids[0][k] for k in MOTION} == {k: [UNKNOWNS[k].identity] for k in MOTION}
+    assert {k: grids[1][k] for k in MOTION} == {**{k: list(UNKNOWNS[k].grid) for k in MOTION},
+                                                "hand_size_factor": [1.15]}
 
 
 def test_setup_is_checked_before_any_fit(tmp_path, monkeypatch):

@@ -5,10 +5,11 @@ a ``radar`` unknown (the chirp set-up, the range handling) needs a simulation pe
 combination; a ``finish`` unknown is applied to rows simulated at a deep dB floor, approaching high, by the default
 processing (handradar.synthesis.measured.finish_rows), and costs no simulation; a ``motion`` unknown moves one draw
 range of the motion library (handradar.hand.motions.DEFAULT_RANGES, or the manifest's ``motion_ranges``: the prior)
-by a factor or a shift, and is searched one at a time at the chosen radar and finish (a simulation a candidate). The manifest (handradar.data.measured)
-checks a stated value's kind here, the job (``synth.measured.unknowns`` / ``fit.grid``, handradar.tasks.measured)
-sets or widens one by its name, the fit (handradar.synthesis.measured.fit_unknowns) reads the stages, the
-tables read the fitted values (``synth.fitted.<name>``).
+by a factor or a shift, and is searched one at a time at the chosen radar and finish (a simulation a candidate).
+The manifest (handradar.data.measured) checks a stated value's kind here, the job (``synth.measured.unknowns`` /
+``fit.grid``, handradar.tasks.measured) sets or widens one by its name, the fit
+(handradar.synthesis.measured.fit_unknowns) reads the stages, the tables read the fitted values
+(``synth.fitted.<name>``).
 """
 
 from __future__ import annotations
@@ -45,6 +46,10 @@ class Unknown:
     motion: str = ""
     move: str = ""
 
+    def __post_init__(self) -> None:
+        if self.stage not in STAGES or (self.stage == "motion") != (self.move in MOVES):
+            raise ValueError(f"unknown {self.name!r}: stage {self.stage!r}, move {self.move!r}")
+
     def check(self, value: object) -> str | None:
         """Why a manifest's stated ``value`` is not one of this unknown's, or None."""
         if self.kind == "choice":
@@ -57,11 +62,6 @@ class Unknown:
     @property
     def numeric(self) -> bool:
         return self.kind != "choice"
-
-    @property
-    def simulated(self) -> bool:
-        """Whether each candidate needs a simulation."""
-        return self.stage != "finish"
 
     @property
     def identity(self) -> float | None:

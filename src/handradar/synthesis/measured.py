@@ -18,7 +18,8 @@ magnitude or power, the normalisation); which end of the Doppler axis is approac
 zero row.
 
 The loop period (v_max), the time per column and the chirps a frame (zero-padded to the Doppler
-bins: fewer chirps widen every Doppler line) need a simulation each. The uncertainty is a
+bins: fewer chirps widen every Doppler line) need a simulation each, as does each candidate of the motions'
+shared draws (speed, tremor, angle, distance, hand size: :func:`motion_ranges`), searched one at a time after them. The uncertainty is a
 bootstrap over the measured rows (classes resampled within themselves): the share of resamples that
 choose each candidate value, and the 2.5-97.5 % range of the chosen values. A numeric value chosen at the edge
 of its grid is reported as such (:func:`grid_edges`), with how to widen the grid.

@@ -172,7 +172,8 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     """The manifest's unknowns: set in ``synth.measured.unknowns``, else fitted (unpaired, :func:`fit_unknowns`) on
     the measured rows ``x``: class by class with their labels ``y``, or pooled (``y`` None: label-free, one image of
     all rows against one of all synthetic rows). Candidates: ``synth.measured.fit.grid``, else the unknown's default
-    grid (handradar.data.unknowns). The fit is cached under the synthesis cache and logged (``synth.fitted.*``); a
+    grid (handradar.data.unknowns); the motion unknowns only with ``synth.measured.fit.motions`` (else their prior,
+    the manifest's ``motion_ranges``, as it is). The fit is cached under the synthesis cache and logged (``synth.fitted.*``); a
     value at the edge of its grid is logged as a warning."""
     cfg = job.cfg.synth.measured
     m, shape = measured_manifest(job.real.path)
@@ -184,6 +185,8 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
             grid[name] = [given[name]]
         elif (stated := m.value_of(name)) != UNKNOWN:
             grid[name] = [stated]
+        elif u.stage == "motion" and not fit.get("motions"):
+            grid[name] = [u.identity]  # the motions' prior as it is, unless fit.motions asks
         else:
             grid[name] = list(fit["grid"].get(name, u.grid))
     if all(len(v) == 1 for v in grid.values()):
