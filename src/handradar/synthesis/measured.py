@@ -379,29 +379,29 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     synth_rng = np.random.default_rng([seed, 1])  # the synthetic rows' resamples: the measured ones' stay as they were
     for name in (k for k in motions if len(g[k]) > 1):
         identity = UNKNOWNS[name].identity
-        tried, rows = [], []
+        tried, made_rows = [], []
         for v in sorted(map(float, g[name]), key=lambda v: abs(v - identity)):  # ties: the candidate nearest the prior
             made = simulate({**{k: values[k] for k in radar_keys}, **{k: values[k] for k in motions}, name: v})
             if made is None:
                 continue
             x = finish_rows(made[0], values, seed, processing)
-            if not any(np.array_equal(x, earlier) for earlier, _ in rows):  # a shift clipped at 0: the same draws
+            if not any(np.array_equal(x, earlier) for earlier, _ in made_rows):  # a shift clipped at 0: the same draws
                 tried.append(v)
-                rows.append((x, np.asarray(made[1])))
+                made_rows.append((x, np.asarray(made[1])))
         if not tried:
             raise ValueError(f"no candidate of {name} could be simulated")
-        gaps = objectives(real_moments, np.stack([class_moments(x, y, n_classes, objective) for x, y in rows]))
+        gaps = objectives(real_moments, np.stack([class_moments(x, y, n_classes, objective) for x, y in made_rows]))
         best = int(np.argmin(gaps))
         candidates += [{**values, name: v, "gap": float(gap)} for v, gap in zip(tried, gaps)]
         # each resample redraws the measured rows and, the same for every candidate (their draws are shared), the
         # synthetic rows: a motion's candidates lie close, and the synthetic rows' own sampling moves their ranking
-        y = rows[0][1]
+        y = made_rows[0][1]
         synth_members = [np.flatnonzero(y == c) for c in range(n_classes)]
         boot = np.zeros((len(resamples), len(tried)))
         for i, real_r in enumerate(resamples):
             pick = np.concatenate([synth_rng.choice(m, size=len(m)) for m in synth_members])
             boot[i] = objectives(real_r, np.stack([class_moments(x[pick], y[pick], n_classes, objective)
-                                                   for x, _ in rows]))
+                                                   for x, _ in made_rows]))
         chosen[name] = [tried[i] for i in boot.argmin(axis=1)]
         wins = float(np.mean(boot[:, best] < boot[:, 0])) if resamples else 1.0
         if best and tried[0] == identity and wins < PRIOR_KEPT_BELOW:
