@@ -68,6 +68,10 @@ class Unknown:
         """A motion unknown's value that keeps its prior range (1 for a factor, 0 for a shift); None otherwise."""
         return {"factor": 1.0, "shift": 0.0}.get(self.move)
 
+    def keeps_prior(self, value: object) -> bool:
+        """Whether ``value`` of a motion unknown leaves its draw range as the prior has it."""
+        return value is not None and float(value) == self.identity
+
     def moved(self, prior: tuple[float, float], value: float) -> tuple[float, float]:
         """A motion unknown's draw range: the ``prior`` (lo, hi) multiplied by ``value`` (factor) or shifted by it
         (shift; a range of a non-negative field, tremor, stays at or above 0)."""

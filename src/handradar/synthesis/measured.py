@@ -182,7 +182,7 @@ def motion_ranges(m: Manifest, values: Mapping[str, object] | None = None) -> tu
     by_class = {c: {k: tuple(v) for k, v in r.items()} for c, r in m.class_ranges.items()}
     for name in MOTION:
         u, value = UNKNOWNS[name], (values or {}).get(name)
-        if value is None or float(value) == u.identity:
+        if value is None or u.keeps_prior(value):
             continue
         shared[u.motion] = u.moved(shared.get(u.motion, DEFAULT_RANGES[u.motion]), float(value))
         for r in by_class.values():
@@ -318,9 +318,9 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     turn (grid order) over its candidates, at the chosen radar, finish and earlier motions: one pass of coordinate
     search. The bootstrap re-ranks the ``boot_candidates`` best combinations, and each motion unknown's candidates; it
     is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has fewer than 2 rows, whose every resample
-    is the same rows; a motion unknown's resamples redraw its candidates' synthetic rows too. A motion unknown leaves its
-    prior only for a candidate that beats it in ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result names
-    those held back): a move the rows cannot tell from the synthetic rows' own sampling is not made
+    is the same rows; a motion unknown's resamples redraw its candidates' synthetic rows too. A motion unknown leaves
+    its prior only for a candidate that beats it in ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result
+    names those held back): a move the rows cannot tell from the synthetic rows' own sampling is not made
     (docs/datasets.md#fitting-the-motions). ``objective``: :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
@@ -372,8 +372,8 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
     # behind on all rows is not chosen by a resample of them
     contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
-    chosen = {k: [combos[contenders[np.argmin(objectives(r, synth_moments[contenders]))]][k] for r in resamples]
-              for k in g if UNKNOWNS[k].stage != "motion"}
+    winners = [combos[contenders[np.argmin(objectives(r, synth_moments[contenders]))]] for r in resamples]
+    chosen = {k: [w[k] for w in winners] for k in g if UNKNOWNS[k].stage != "motion"}
     candidates = [{**c, "gap": float(gap)} for c, gap in zip(combos, gaps)]
     kept: dict[str, dict] = {}
     synth_rng = np.random.default_rng([seed, 1])  # the synthetic rows' resamples: the measured ones' stay as they were

@@ -173,8 +173,8 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     the measured rows ``x``: class by class with their labels ``y``, or pooled (``y`` None: label-free, one image of
     all rows against one of all synthetic rows). Candidates: ``synth.measured.fit.grid``, else the unknown's default
     grid (handradar.data.unknowns); the motion unknowns only with ``synth.measured.fit.motions`` (else their prior,
-    the manifest's ``motion_ranges``, as it is). The fit is cached under the synthesis cache and logged (``synth.fitted.*``); a
-    value at the edge of its grid is logged as a warning."""
+    the manifest's ``motion_ranges``, as it is). The fit is cached under the synthesis cache and logged
+    (``synth.fitted.*``); a value at the edge of its grid is logged as a warning."""
     cfg = job.cfg.synth.measured
     m, shape = measured_manifest(job.real.path)
     given = {k: v for k, v in OmegaConf.to_container(cfg.unknowns, resolve=True).items() if v is not None}
@@ -210,7 +210,7 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
                                            cache_dir=Path(job.cfg.synth.cache_dir), sim=sim, finish=False)
             except ValueError as exc:  # chirps that do not fit in the frame: no candidate
                 log.info("fit: %s skipped (%s)", ", ".join(f"{k} {v}" for k, v in values.items()
-                                                          if k not in MOTION or v != UNKNOWNS[k].identity), exc)
+                                                          if k not in MOTION or not UNKNOWNS[k].keeps_prior(v)), exc)
                 return None
             d = load_arrays(path)
             return d.x, np.zeros_like(d.y) if pooled else d.y
@@ -223,9 +223,11 @@ def fitted_unknowns(job: Job, x: np.ndarray, y: np.ndarray | None) -> dict:
     summary = UnknownsFit.from_dict(result)
     (log.warning if summary.edges else log.info)("fitted: %s", summary.summary())
     shared, _ = motion_ranges(m, result["values"])
-    moved = [UNKNOWNS[k].motion for k in MOTION if result["values"].get(k, UNKNOWNS[k].identity) != UNKNOWNS[k].identity]
+    moved = [UNKNOWNS[k].motion for k in MOTION if k in result["values"]
+             and not UNKNOWNS[k].keeps_prior(result["values"][k])]
     if moved:
-        log.info("motions drawn from the fitted ranges: %s", ", ".join(f"{k} {shared[k][0]:g}-{shared[k][1]:g}" for k in moved))
+        log.info("motions drawn from the fitted ranges: %s",
+                 ", ".join(f"{k} {shared[k][0]:g}-{shared[k][1]:g}" for k in moved))
     job.log_params({f"synth.fitted.{k}": v for k, v in result["values"].items()})
     job.tracker.log_artifact(out, "synthesis")
     return result["values"]
