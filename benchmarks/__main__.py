@@ -7,19 +7,21 @@ is 1 if any failed."""
 from __future__ import annotations
 
 import importlib
-import platform
 import sys
 import traceback
 from pathlib import Path
 
 import torch
 
+from handradar.provenance import code_version, machine
+
 HERE = Path(__file__).parent
 
 
 def main(argv: list[str]) -> int:
     names = argv or sorted(p.stem for p in HERE.glob("bench_*.py"))
-    lines = [f"# Benchmarks\n\n{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads, "
+    command = " ".join(["python -m benchmarks", *argv])
+    lines = [f"# Benchmarks\n\n`{command}` at {code_version()}: {machine()}, {torch.get_num_threads()} torch threads, "
              f"torch {torch.__version__}\n", "| benchmark | value | unit | note |", "|---|---|---|---|"]
     out = HERE / "results.md"
     failed = []

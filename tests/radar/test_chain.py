@@ -162,6 +162,34 @@ def test_factored_range_response_equals_the_term_by_term_form(window_name):
                                _range_response_reference(nu, frac_bins, n, window_name), atol=0, rtol=0)
 
 
+@pytest.mark.parametrize("window_name", ["hann", "blackman"])
+@pytest.mark.parametrize("sum_dim", [0, 1, -1])
+def test_summed_range_response_is_the_sum_of_the_term_by_term_responses(window_name, sum_dim):
+    """sum_dim: the tones' responses summed over that axis, poles among them, against the term-by-term reference
+    of each tone summed afterwards (float64, float32, a carrier, autograd)."""
+    n = 128
+    gen = torch.Generator().manual_seed(2)
+    nu = torch.rand(3, 7, 50, generator=gen, dtype=torch.float64) * 0.4
+    nu[0, 2, :6] = torch.arange(6, dtype=torch.float64) / n  # on the poles of bins and side lobes
+    nu[1, :, 3] = 4.0 / n + 1e-8 * torch.randn(7, generator=gen, dtype=torch.float64)  # within the pole limit
+    carrier = torch.polar(torch.rand(nu.shape, generator=gen, dtype=torch.float64),
+                          torch.rand(nu.shape, generator=gen, dtype=torch.float64) * 100.0)
+    bins = torch.arange(1, 6)
+    ref = (_range_response_reference(nu, bins, n, window_name) * carrier[..., None]).sum(sum_dim % 3)
+    summed = range_response(nu, bins, n, window_name, carrier, sum_dim=sum_dim)
+    assert summed.shape == ref.shape and summed.dtype == torch.complex128
+    scale = float(ref.abs().max())
+    torch.testing.assert_close(summed, ref, atol=1e-10 * scale, rtol=0)
+    summed32 = range_response(nu.float(), bins, n, window_name, carrier.to(torch.complex64), sum_dim=sum_dim)
+    assert summed32.dtype == torch.complex64
+    assert float((summed32 - ref).abs().max()) < 2e-5 * scale
+    none = range_response(nu[:, :0], bins, n, window_name, carrier[:, :0], sum_dim=1)  # no tones: zeros
+    assert none.shape == (3, 50, 5) and float(none.abs().max()) == 0.0
+    x = nu[2, :3, 10:14].clone().requires_grad_(True)  # away from the poles, where the form takes the limit
+    torch.autograd.gradcheck(
+        lambda v: torch.view_as_real(range_response(v, bins, n, window_name, sum_dim=sum_dim % 2)), (x,))
+
+
 def test_range_response_chunks_change_nothing(monkeypatch):
     import handradar.radar.chain as chain_module
 

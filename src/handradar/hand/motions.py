@@ -205,14 +205,22 @@ def _swing(joints: np.ndarray, elbow: np.ndarray, axis: np.ndarray, angle: np.nd
 
 def _swipe_angle(pose: np.ndarray, elbow: np.ndarray, axis: np.ndarray, wrist_share: float, chord_m: float) -> float:
     """The swing angle (radians, at most half a turn) that carries the hand centre (wrist and MCPs) ``chord_m`` from
-    start to end: the chord on a grid of 1,025 angles at once, interpolated (it grows with the angle up to half a
-    turn; the grid's step of 3 mrad puts the chord within a micrometre)."""
-    angles = np.linspace(0.0, np.pi, 1025)
+    start to end: the chord on 65 angles at once, then on 65 within the step that brackets ``chord_m``, interpolated
+    (it grows with the angle up to half a turn; the fine step of 0.8 mrad puts the chord within a micrometre)."""
     centre = pose[list(CENTRE)]  # the wrist first: _swing turns the hand about it
-    ends = _swing(np.broadcast_to(centre, (2 * len(angles), *centre.shape)), elbow, axis,
-                  np.concatenate([-angles / 2, angles / 2]), wrist_share).mean(axis=1)
-    chords = np.linalg.norm(ends[len(angles):] - ends[:len(angles)], axis=-1)
-    return float(np.interp(chord_m, chords, angles)) if chord_m < chords[-1] else float(np.pi)
+
+    def chords(angles: np.ndarray) -> np.ndarray:
+        ends = _swing(np.broadcast_to(centre, (2 * len(angles), *centre.shape)), elbow, axis,
+                      np.concatenate([-angles / 2, angles / 2]), wrist_share).mean(axis=1)
+        return np.linalg.norm(ends[len(angles):] - ends[:len(angles)], axis=-1)
+
+    coarse = np.linspace(0.0, np.pi, 65)
+    c = chords(coarse)
+    if chord_m >= c[-1]:
+        return float(np.pi)
+    i = max(int(np.searchsorted(c, chord_m)), 1)
+    fine = np.linspace(coarse[i - 1], coarse[i], 65)
+    return float(np.interp(chord_m, chords(fine), fine))
 
 
 def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rate_hz: float = 100.0,

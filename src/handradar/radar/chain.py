@@ -222,18 +222,20 @@ def dirichlet(nu: torch.Tensor, n: int) -> torch.Tensor:
 
 
 def range_response(beat_cycles: torch.Tensor, bins: torch.Tensor, n: int, window_name: str,
-                   carrier: torch.Tensor | None = None) -> torch.Tensor:
+                   carrier: torch.Tensor | None = None, sum_dim: int | None = None) -> torch.Tensor:
     """Closed-form windowed range FFT of a unit beat tone.
 
     beat_cycles: beat frequency in cycles per sample (f_b / fs), any shape S.
     bins: range-bin indices, shape (B,). Returns complex (*S, B): sum_k w[k] exp(j 2 pi (nu - b/n) k),
     exactly what :func:`range_profiles_from_adc` gives for ``exp(j 2 pi nu k)``; times ``carrier``
-    (complex, shape S: each tone's amplitude and phase) when given.
+    (complex, shape S: each tone's amplitude and phase) when given. ``sum_dim``: the responses summed
+    over that axis of S (the tones of one signal: S without it, then B), never formed one by one.
 
     Every term is a Dirichlet kernel D(x - q/n) at an integer shift q (the bin b and the window's
     side lobes b -+ m), and D(x - q/n) = (-1)^q sin(pi n x) exp(j pi (n-1) x) exp(-j pi (n-1) q/n)
     / sin(pi x - pi q/n): so the sines and the phase are evaluated once per beat value, not per
-    bin and term (the simulator's hot spot), and the bins are one real matmul over the shifts q.
+    bin and term (the simulator's hot spot), and the bins are one real matmul over the shifts q
+    (and over the summed tones, whose sum commutes with it).
     The denominators are float64 (a difference of products), the rest in the input's precision;
     returned in the input's complex dtype. Beat values within ~3e-7 cycles of a pole (x - q/n an
     integer) go through the term-by-term form (:func:`dirichlet`), which takes the limit.
@@ -242,14 +244,24 @@ def range_response(beat_cycles: torch.Tensor, bins: torch.Tensor, n: int, window
     bins_i = torch.as_tensor(bins)
     if bins_i.numel() == 0 or (bins_i.is_floating_point() and not bool((bins_i == torch.round(bins_i)).all())):
         out = _range_response_terms(beat_cycles, bins_i, n, window_name)  # the factorisation needs integer bins
-        return out if carrier is None else out * carrier[..., None]
+        out = out if carrier is None else out * carrier[..., None]
+        return out if sum_dim is None else out.sum(sum_dim % beat_cycles.dim())
     bins_i = bins_i.round().long() if bins_i.is_floating_point() else bins_i
+    # (G, R): each of the R outputs sums G tones (G = 1: nothing summed), the summed axis first
+    if sum_dim is None:
+        out_shape, beats = beat_cycles.shape, beat_cycles.reshape(1, -1)
+    else:
+        moved = beat_cycles.movedim(sum_dim, 0)
+        out_shape, beats = moved.shape[1:], moved.reshape(moved.shape[0], math.prod(moved.shape[1:]))
+        carrier = None if carrier is None else carrier.movedim(sum_dim, 0)
+    carrier_2d = None if carrier is None else carrier.reshape(beats.shape)
+    g, r = beats.shape
     # float32 beats: float32 reciprocals, sums and output (the old term-by-term form's precision);
     # the denominators themselves are always differences of float64 products (poles)
     work = torch.float64 if beat_cycles.dtype == torch.float64 else torch.float32
     dev = beat_cycles.device
-    x = beat_cycles.to(torch.float64).reshape(-1)  # (E,)
-    # a pole: x - q/n an integer, i.e. n x one; rows within 3.2e-7 cycles of any integer n x (a
+    x = beats.to(torch.float64)
+    # a pole: x - q/n an integer, i.e. n x one; values within 3.2e-7 cycles of any integer n x (a
     # superset of |sin(pi (x - q/n))| < 1e-6) are left to the term-by-term form, which takes the limit
     near = (n * x - torch.round(n * x)).abs() < 3.2e-7 * n
     has_pole = bool(near.any())
@@ -267,45 +279,49 @@ def range_response(beat_cycles: torch.Tensor, bins: torch.Tensor, n: int, window
     shift = torch.stack([torch.cos(math.pi * qf / n), -torch.sin(math.pi * qf / n)], dim=1)  # (Q, 2)
     mix = torch.cat([torch.stack([w.real, w.imag], dim=-1), torch.stack([-w.imag, w.real], dim=-1)])  # (2Q, B, 2)
     nb = bins_i.shape[0]
-    mix = mix.reshape(2 * len(q), 2 * nb).to(work)
-    carrier_flat = None if carrier is None else carrier.reshape(-1)
+    mix = mix.reshape(2 * len(q), 2 * nb).repeat_interleave(g, dim=0).to(work)  # (2Q G, 2B): each tone's row
     grad = torch.is_grad_enabled() and (beat_cycles.requires_grad or (carrier is not None and carrier.requires_grad))
-    out = None if grad else torch.empty(xs.shape[0], 2 * nb, dtype=work, device=dev)
+    out = None if grad else torch.empty(r, 2 * nb, dtype=work, device=dev)
     parts = []
-    # in chunks of beat values: small temporaries are reused by the allocator, where large ones
+    # in chunks of outputs: small temporaries are reused by the allocator, where large ones
     # are mapped and faulted in afresh on every call (measured: the chunks halve the time)
-    chunk = _RESPONSE_CHUNK
-    for e0 in range(0, max(xs.shape[0], 1), chunk):  # once at least: no beats still gives a (0, B) graph node
-        xc = xs[e0:e0 + chunk]
-        # 1 / sin(pi (x - q/n)), (Q, E): sin(pi x) cos(pi q/n) - cos(pi x) sin(pi q/n) as one float64
+    chunk = max(1, _RESPONSE_CHUNK // max(g, 1))
+    for c0 in range(0, max(r, 1), chunk):  # once at least: no beats still gives a (0, B) graph node
+        xc = xs[:, c0:c0 + chunk]  # (G, Rc)
+        # 1 / sin(pi (x - q/n)), (Q, G Rc): sin(pi x) cos(pi q/n) - cos(pi x) sin(pi q/n) as one float64
         # matmul (the long axis innermost keeps every later broadcast fast)
-        inv = (shift @ torch.stack([torch.sin(math.pi * xc), torch.cos(math.pi * xc)])).to(work).reciprocal()
-        # per beat value L = sin(pi n x) e^{j pi (n-1) x} (times the carrier); L sum_q inv_q W_qb is one
-        # real matmul of [Re L inv; Im L inv] (2Q, E) with [[Re W, Im W], [-Im W, Re W]], its columns
-        # interleaved (re, im) per bin so that the product is the complex result's real view
+        inv = (shift @ torch.stack([torch.sin(math.pi * xc), torch.cos(math.pi * xc)]).reshape(2, -1))
+        inv = inv.to(work).reciprocal()
+        # per beat value L = sin(pi n x) e^{j pi (n-1) x} (times the carrier, 0 at a pole: added below);
+        # L sum_q inv_q W_qb is one real matmul of [Re L inv; Im L inv] (2Q G, Rc) with [[Re W, Im W],
+        # [-Im W, Re W]] (rows repeated per tone), its columns interleaved (re, im) per bin so that
+        # the product is the complex result's real view
         numer, phase = torch.sin(math.pi * n * xc), math.pi * (n - 1) * xc
         lead = torch.complex(numer * torch.cos(phase), numer * torch.sin(phase))
-        if carrier_flat is not None:
-            lead = lead * carrier_flat[e0:e0 + chunk].to(lead.dtype)
-        scaled = torch.cat([inv * lead.real.to(work), inv * lead.imag.to(work)]).T
+        if carrier_2d is not None:
+            lead = lead * carrier_2d[:, c0:c0 + chunk].to(lead.dtype)
+        if has_pole:
+            lead = torch.where(near[:, c0:c0 + chunk], 0, lead)
+        lead = lead.reshape(-1)
+        scaled = torch.cat([inv * lead.real.to(work), inv * lead.imag.to(work)])
+        scaled = scaled.reshape(2 * len(q) * g, xc.shape[1]).T  # (Rc, 2Q G): a tone's terms side by side
         if out is None:
             parts.append(scaled @ mix)
         else:
-            torch.matmul(scaled, mix, out=out[e0:e0 + chunk])
+            torch.matmul(scaled, mix, out=out[c0:c0 + chunk])
     if out is None:
         out = torch.cat(parts) if len(parts) > 1 else parts[0]
-    out = torch.view_as_complex(out.reshape(-1, nb, 2))  # (E, B)
     if has_pole:
-        rows = torch.nonzero(near).flatten()
+        at = torch.nonzero(near.reshape(-1)).flatten()
         # in the caller's precision: exactly the term-by-term values
-        poles = _range_response_terms(beat_cycles.reshape(-1)[rows], bins_i.to(dev), n, window_name)
-        if carrier is not None:
-            poles = poles * carrier.reshape(-1)[rows, None]
-        if out.requires_grad:
-            out = out.index_put((rows,), poles.to(out.dtype))
-        else:  # in place: no copy of the whole response for a few rows
-            out[rows] = poles.to(out.dtype)
-    return out.reshape(*beat_cycles.shape, nb)
+        poles = _range_response_terms(beats.reshape(-1)[at], bins_i.to(dev), n, window_name)
+        if carrier_2d is not None:
+            poles = poles * carrier_2d.reshape(-1)[at, None]
+        poles = torch.view_as_real(poles.to(torch.complex128 if work == torch.float64 else torch.complex64))
+        poles = poles.reshape(-1, 2 * nb)
+        # in place where autograd is off: no copy of the whole response for a few values
+        out = out.index_add(0, at % r, poles) if out.requires_grad else out.index_add_(0, at % r, poles)
+    return torch.view_as_complex(out.reshape(*out_shape, nb, 2))
 
 
 def _range_response_terms(beat_cycles: torch.Tensor, bins: torch.Tensor, n: int, window_name: str) -> torch.Tensor:

@@ -82,12 +82,13 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     bins = torch.arange(b0, b1, device=dev)
     beat = rng * (2.0 * radar.slope_hz_per_s / SPEED_OF_LIGHT_M_S / radar.sample_rate_hz)
     carrier = torch.polar(amp_c, carrier_phase_rad(radar, rng))  # A exp(+j 4 pi R / lambda_0)
-    prof = range_response(beat, bins, radar.n_samples, chain.range_window, carrier).to(cdtype)  # (B, K, M, nb)
-
-    bsz, m = prof.shape[0], prof.shape[2]
-    if summed:
-        total = prof.sum(1).reshape(bsz, f, l, c, 1, -1).expand(-1, -1, -1, -1, radar.n_rx, -1)
+    bsz = beat.shape[0]
+    if summed:  # the points' sum, (B, M, nb): their responses are never formed one by one
+        total = range_response(beat, bins, radar.n_samples, chain.range_window, carrier, sum_dim=1).to(cdtype)
+        total = total.reshape(bsz, f, l, c, 1, -1).expand(-1, -1, -1, -1, radar.n_rx, -1)
         return total.reshape(bsz, f, l, c * radar.n_rx, -1)
+    prof = range_response(beat, bins, radar.n_samples, chain.range_window, carrier).to(cdtype)  # (B, K, M, nb)
+    m = prof.shape[2]
     if owner.shape[0] == N_SLOTS and bool((owner == torch.arange(N_SLOTS, device=dev)).all()):
         slots = torch.cat([prof, prof.new_zeros(bsz, 1, m, prof.shape[-1])], dim=1)
     elif owner.shape[0] <= N_SLOTS and bool((owner[1:] > owner[:-1]).all()):  # distinct slots: a copy
