@@ -321,7 +321,34 @@ def test_fit_recovers_the_motions_speed(tmp_path, truth):
         simulate(r)), grid, n_boot=50, seed=0)
     assert fit.values["speed_factor"] == truth and fit.shares["speed_factor"][str(truth)] == 1.0 and not fit.kept
     assert fit.edges == ["speed_factor"]  # 0.67 and 1.5 are the grid's edges: said so
-    assert len(fit.candidates) == 1 + 3  # the radar (fixed) at the prior, then the speed's three candidates
+    # the radar (fixed) at the prior, the speed's three candidates, the radar again at the fitted speed: one pass
+    assert len(fit.candidates) == 1 + 3 + 1 and fit.passes == 1
+
+
+def _blobs(speed: float, v_max: float, seed: int, n: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """n rows of one class (32 x 32): a Gaussian blob whose Doppler width is 4 speed / v_max rows and whose duration
+    is 6 / speed columns, its centre jittered by up to a pixel; what a faster hand and a slower radar trade."""
+    rng = np.random.default_rng(seed)
+    d, t = np.arange(32.0)[:, None], np.arange(32.0)[None, :]
+    rows = [np.exp(-0.5 * (((d - 16 - rng.uniform(-1, 1)) / (4 * speed / v_max)) ** 2
+                           + ((t - 16 - rng.uniform(-1, 1)) / (6 / speed)) ** 2)) for _ in range(n)]
+    return np.stack(rows).astype(np.float32), np.zeros(n, np.int64)
+
+
+def test_a_second_pass_refits_the_radar_at_the_fitted_motions():
+    """Speed and v_max trade in a row's Doppler width; only the speed sets its duration. Rows of speed x 1.5 at
+    v_max 2: the radar fitted at the prior's speed chooses v_max 1.5 (the width alone), the motions then move the
+    speed to 1.5 (the duration), and only a second pass at that speed finds v_max 2 again."""
+    real_x, real_y = _blobs(1.5, 2.0, seed=1)
+    grid = {"v_max_m_s": [1.0, 1.5, 2.0, 3.0], "speed_factor": [0.67, 1.0, 1.5]}
+    simulate = lambda v: _blobs(v["speed_factor"], v["v_max_m_s"], seed=2)  # noqa: E731
+    one = fit_unknowns(real_x, real_y, 1, simulate, grid, n_boot=20, seed=0, passes=1)
+    assert (one.values["v_max_m_s"], one.values["speed_factor"], one.passes) == (1.5, 1.5, 1)
+    two = fit_unknowns(real_x, real_y, 1, simulate, grid, n_boot=20, seed=0)
+    assert (two.values["v_max_m_s"], two.values["speed_factor"], two.passes) == (2.0, 1.5, 2)
+    assert two.shares["v_max_m_s"]["2.0"] == 1.0 and "2 passes" in two.summary()
+    # the candidates of both passes: 4 radars at the prior's speed, 3 speeds, 4 radars again, 3 speeds again
+    assert len(two.candidates) == 4 + 3 + 4 + 3 and UnknownsFit.from_dict(two.as_dict()).passes == 2
 
 
 def test_a_motion_the_rows_cannot_tell_keeps_its_prior(tmp_path):

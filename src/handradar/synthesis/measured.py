@@ -53,7 +53,7 @@ from handradar.synthesis.providers import synthesize_source
 log = logging.getLogger(__name__)
 
 DEEP_FLOOR_DB = 60.0  # the floor rows are synthesised at before the fit re-floors them
-FIT_VERSION = 2  # raised whenever fit_unknowns chooses otherwise (2: the motion unknowns): no stale cached fit
+FIT_VERSION = 3  # raised whenever fit_unknowns chooses otherwise (2: motion unknowns; 3: passes): no stale cached fit
 PRIOR_KEPT_BELOW = 0.975  # a motion unknown leaves its prior only when its best beats it in this share of resamples
 OBJECTIVES = {  # what fit_unknowns compares, 1 - SSIM averaged over its images
     "means": "1 - SSIM of class-mean images, mean over classes",
@@ -262,18 +262,19 @@ class UnknownsFit:
     n_boot: int = 0                 # resamples behind shares and ranges; 0: the uncertainty could not be estimated
     edges: list[str] = field(default_factory=list)  # unknowns chosen at the edge of their grid (grid_edges)
     kept: dict[str, dict] = field(default_factory=dict)  # motion unknown -> {best, wins}: its prior kept (PRIOR_KEPT_BELOW)
+    passes: int = 1                 # rounds of the motions' search (each after the radar and processing were refitted)
 
     @classmethod
     def from_dict(cls, d: Mapping) -> UnknownsFit:
         """The fit :meth:`as_dict` wrote (the cached ``measured-fit-<hash>.json``)."""
         return cls(**{k: d[k] for k in ("values", "candidates", "shares", "ranges", "n_rows", "n_boot")},
                    objective=next(k for k, v in OBJECTIVES.items() if v == d.get("objective", OBJECTIVES["means"])),
-                   edges=list(d.get("edges", [])), kept=dict(d.get("kept", {})))
+                   edges=list(d.get("edges", [])), kept=dict(d.get("kept", {})), passes=int(d.get("passes", 1)))
 
     def as_dict(self) -> dict:
         return {"values": self.values, "candidates": self.candidates, "shares": self.shares, "ranges": self.ranges,
                 "n_rows": self.n_rows, "objective": OBJECTIVES[self.objective], "n_boot": self.n_boot,
-                "edges": self.edges, "kept": self.kept}
+                "edges": self.edges, "kept": self.kept, "passes": self.passes}
 
     def summary(self) -> str:
         parts = []
@@ -291,6 +292,8 @@ class UnknownsFit:
                     if k in self.kept else "")
             parts.append(f"{k} {v}{rng}{edge} (chosen by {share:.0%} of resamples{kept})")
         text = "; ".join(parts)
+        if self.passes > 1:
+            text += f" ({self.passes} passes: the radar and processing refitted at the fitted motions)"
         if not self.n_boot:
             text += " (uncertainty not estimated: a class has fewer than 2 rows to resample)"
         if self.edges:
@@ -305,7 +308,8 @@ class UnknownsFit:
 def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                  simulate: Callable[[dict], tuple[np.ndarray, np.ndarray] | None],
                  grid: Mapping[str, Sequence], *, n_boot: int = 200, boot_candidates: int = 16,
-                 seed: int = 0, objective: str = "means", processing: ChainConfig | None = None) -> UnknownsFit:
+                 seed: int = 0, objective: str = "means", processing: ChainConfig | None = None,
+                 passes: int = 2) -> UnknownsFit:
     """Choose the unknowns whose synthetic class means (and spreads) are closest to the measured ones (module docstring).
 
     simulate({radar and motion unknowns}) -> (x, y): synthetic rows as simulated (``DEEP_FLOOR_DB``, approaching high),
@@ -315,8 +319,11 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     to [None] (as many chirps as Doppler bins), [None] (no noise) and [1]. The rows of each candidate are finished
     (:func:`finish_rows`) on ``processing``. The radar and finish unknowns are searched over every combination, the
     motions' draws at their prior (a motion unknown's identity, or its one candidate); then each motion unknown in
-    turn (grid order) over its candidates, at the chosen radar, finish and earlier motions: one pass of coordinate
-    search. The bootstrap re-ranks the ``boot_candidates`` best combinations, and each motion unknown's candidates; it
+    turn (grid order) over its candidates, at the chosen radar, finish and earlier motions. Where a motion moved,
+    the radar and finish combinations are searched again at the fitted motions (a faster hand and a shorter column
+    trade: the first choice was made at the prior's speed) and, where that changed them, the motions again: at most
+    ``passes`` rounds of the motions' search. The bootstrap re-ranks the ``boot_candidates`` best combinations, and
+    each motion unknown's candidates; it
     is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has fewer than 2 rows, whose every resample
     is the same rows; a motion unknown's resamples redraw its candidates' synthetic rows too. A motion unknown leaves
     its prior only for a candidate that beats it in ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result
@@ -332,26 +339,6 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     finished = [k for k in g if UNKNOWNS[k].stage == "finish"]
     motions = {k: float(g[k][0]) if len(g[k]) == 1 else UNKNOWNS[k].identity
                for k in g if UNKNOWNS[k].stage == "motion"}
-    combos, synth_moments = [], []
-    for radar_values in itertools.product(*(g[k] for k in radar_keys)):
-        radar = {k: (v if v is None or not UNKNOWNS[k].numeric else int(v) if UNKNOWNS[k].kind == "count" else float(v))
-                 for k, v in zip(radar_keys, radar_values)}
-        made = simulate({**radar, **motions})
-        if made is None:
-            continue
-        x, y = made
-        for rest in itertools.product(*(g[k] for k in finished)):
-            values = {**radar, **dict(zip(finished, rest))}
-            if values.get("noise_db") is None and values.get("noise_looks", 1) != g.get("noise_looks", [1])[0]:
-                continue  # without noise its looks change nothing: one candidate
-            if values.get("scale", "db") == "db" and values.get("quantity") not in (None, g.get("quantity", [None])[0]):
-                continue  # in dB a magnitude's image is its power's: one candidate
-            values = {k: (int(v) if k == "noise_looks" else float(v) if isinstance(v, (int, float)) else v)
-                      for k, v in values.items()}
-            combos.append({**values, **motions})
-            synth_moments.append(class_moments(finish_rows(x, values, seed, processing), y, n_classes, objective))
-    if not combos:
-        raise ValueError("no candidate of the grid could be simulated")
 
     def objectives(real_moments: np.ndarray, synth: np.ndarray) -> np.ndarray:
         """The objective of each candidate's moments ``synth`` (candidates, images, doppler, columns)."""
@@ -366,54 +353,104 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     resamples = [class_moments(real_x[rows], real_y[rows], n_classes, objective) for rows in
                  (np.concatenate([rng.choice(m, size=len(m)) for m in members]) for _ in range(n_boot))]
     real_moments = class_moments(real_x, real_y, n_classes, objective)
-    synth_moments = np.stack(synth_moments)  # (combos, classes or 2 classes, doppler, columns)
-    gaps = objectives(real_moments, synth_moments)
-    values = dict(combos[int(np.argmin(gaps))])
-    # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
-    # behind on all rows is not chosen by a resample of them
-    contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
-    winners = [combos[contenders[np.argmin(objectives(r, synth_moments[contenders]))]] for r in resamples]
-    chosen = {k: [w[k] for w in winners] for k in g if UNKNOWNS[k].stage != "motion"}
-    candidates = [{**c, "gap": float(gap)} for c, gap in zip(combos, gaps)]
-    kept: dict[str, dict] = {}
-    synth_rng = np.random.default_rng([seed, 1])  # the synthetic rows' resamples: the measured ones' stay as they were
-    for name in (k for k in motions if len(g[k]) > 1):
-        identity = UNKNOWNS[name].identity
-        tried, made_rows = [], []
-        for v in sorted(map(float, g[name]), key=lambda v: abs(v - identity)):  # ties: the candidate nearest the prior
-            made = simulate({**{k: values[k] for k in radar_keys}, **{k: values[k] for k in motions}, name: v})
+
+    def radar_stage(motion_values: dict) -> tuple[dict, dict, list[dict]]:
+        """Every combination of the radar and finish unknowns at ``motion_values``: the best, each resample's
+        choices by unknown, and every candidate with its objective."""
+        combos, synth_moments = [], []
+        for radar_values in itertools.product(*(g[k] for k in radar_keys)):
+            radar = {k: (v if v is None or not UNKNOWNS[k].numeric else int(v) if UNKNOWNS[k].kind == "count"
+                         else float(v)) for k, v in zip(radar_keys, radar_values)}
+            made = simulate({**radar, **motion_values})
             if made is None:
                 continue
-            x = finish_rows(made[0], values, seed, processing)
-            if not any(np.array_equal(x, earlier) for earlier, _ in made_rows):  # a shift clipped at 0: the same draws
-                tried.append(v)
-                made_rows.append((x, np.asarray(made[1])))
-        if not tried:
-            raise ValueError(f"no candidate of {name} could be simulated")
-        gaps = objectives(real_moments, np.stack([class_moments(x, y, n_classes, objective) for x, y in made_rows]))
-        best = int(np.argmin(gaps))
-        candidates += [{**values, name: v, "gap": float(gap)} for v, gap in zip(tried, gaps)]
-        # each resample redraws the measured rows and, the same for every candidate (their draws are shared), the
-        # synthetic rows: a motion's candidates lie close, and the synthetic rows' own sampling moves their ranking
-        y = made_rows[0][1]
-        synth_members = [np.flatnonzero(y == c) for c in range(n_classes)]
-        boot = np.zeros((len(resamples), len(tried)))
-        for i, real_r in enumerate(resamples):
-            pick = np.concatenate([synth_rng.choice(m, size=len(m)) for m in synth_members])
-            boot[i] = objectives(real_r, np.stack([class_moments(x[pick], y[pick], n_classes, objective)
-                                                   for x, _ in made_rows]))
-        chosen[name] = [tried[i] for i in boot.argmin(axis=1)]
-        wins = float(np.mean(boot[:, best] < boot[:, 0])) if resamples else 1.0
-        if best and tried[0] == identity and wins < PRIOR_KEPT_BELOW:
-            kept[name] = {"best": tried[best], "wins": wins}
-            best = 0
-        values[name] = tried[best]
+            x, y = made
+            for rest in itertools.product(*(g[k] for k in finished)):
+                values = {**radar, **dict(zip(finished, rest))}
+                if values.get("noise_db") is None and values.get("noise_looks", 1) != g.get("noise_looks", [1])[0]:
+                    continue  # without noise its looks change nothing: one candidate
+                if (values.get("scale", "db") == "db"
+                        and values.get("quantity") not in (None, g.get("quantity", [None])[0])):
+                    continue  # in dB a magnitude's image is its power's: one candidate
+                values = {k: (int(v) if k == "noise_looks" else float(v) if isinstance(v, (int, float)) else v)
+                          for k, v in values.items()}
+                combos.append({**values, **motion_values})
+                synth_moments.append(class_moments(finish_rows(x, values, seed, processing), y, n_classes, objective))
+        if not combos:
+            raise ValueError("no candidate of the grid could be simulated")
+        synth_moments = np.stack(synth_moments)  # (combos, classes or 2 classes, doppler, columns)
+        gaps = objectives(real_moments, synth_moments)
+        # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
+        # behind on all rows is not chosen by a resample of them
+        contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
+        winners = [combos[contenders[np.argmin(objectives(r, synth_moments[contenders]))]] for r in resamples]
+        return (dict(combos[int(np.argmin(gaps))]), {k: [w[k] for w in winners] for k in g if k not in motions},
+                [{**c, "gap": float(gap)} for c, gap in zip(combos, gaps)])
+
+    synth_rng = np.random.default_rng([seed, 1])  # the synthetic rows' resamples: the measured ones' stay as they were
+
+    def motion_stage(values: dict) -> tuple[dict, dict, dict, list[dict]]:
+        """Each motion unknown in turn over its candidates at ``values``: the values after it, each resample's
+        choices, the priors kept (:data:`PRIOR_KEPT_BELOW`) and every candidate with its objective."""
+        values, chosen, kept, candidates = dict(values), {}, {}, []
+        for name in (k for k in motions if len(g[k]) > 1):
+            identity = UNKNOWNS[name].identity
+            tried, made_rows = [], []
+            # ties: the candidate nearest the prior
+            for v in sorted(map(float, g[name]), key=lambda v: abs(v - identity)):
+                made = simulate({**{k: values[k] for k in radar_keys}, **{k: values[k] for k in motions}, name: v})
+                if made is None:
+                    continue
+                x = finish_rows(made[0], values, seed, processing)
+                # a shift clipped at 0 makes the same draws: one candidate
+                if not any(np.array_equal(x, earlier) for earlier, _ in made_rows):
+                    tried.append(v)
+                    made_rows.append((x, np.asarray(made[1])))
+            if not tried:
+                raise ValueError(f"no candidate of {name} could be simulated")
+            gaps = objectives(real_moments, np.stack([class_moments(x, y, n_classes, objective) for x, y in made_rows]))
+            best = int(np.argmin(gaps))
+            candidates += [{**values, name: v, "gap": float(gap)} for v, gap in zip(tried, gaps)]
+            # each resample redraws the measured rows and, the same for every candidate (their draws are shared), the
+            # synthetic rows: a motion's candidates lie close, and the synthetic rows' own sampling moves their ranking
+            y = made_rows[0][1]
+            synth_members = [np.flatnonzero(y == c) for c in range(n_classes)]
+            boot = np.zeros((len(resamples), len(tried)))
+            for i, real_r in enumerate(resamples):
+                pick = np.concatenate([synth_rng.choice(m, size=len(m)) for m in synth_members])
+                boot[i] = objectives(real_r, np.stack([class_moments(x[pick], y[pick], n_classes, objective)
+                                                       for x, _ in made_rows]))
+            chosen[name] = [tried[i] for i in boot.argmin(axis=1)]
+            wins = float(np.mean(boot[:, best] < boot[:, 0])) if resamples else 1.0
+            if best and tried[0] == identity and wins < PRIOR_KEPT_BELOW:
+                kept[name] = {"best": tried[best], "wins": wins}
+                best = 0
+            values[name] = tried[best]
+        return values, chosen, kept, candidates
+
+    values, chosen, candidates = radar_stage(motions)
+    kept: dict[str, dict] = {}
+    for n_pass in range(1, passes + 1):
+        moved, chosen_motions, kept, tried = motion_stage(values)
+        chosen.update(chosen_motions)
+        candidates += tried
+        if n_pass == passes or all(moved[k] == values[k] for k in motions):
+            values = moved
+            break
+        # the motions moved: the radar and processing again at them (a faster hand and a longer column trade)
+        again, chosen_radar, tried = radar_stage({k: moved[k] for k in motions})
+        chosen.update(chosen_radar)
+        candidates += tried
+        if all(again[k] == values[k] for k in g if k not in motions):
+            values = moved
+            break
+        values = again
     shares = {k: {str(v): c.count(v) / n_boot for v in dict.fromkeys(c)} for k, c in chosen.items()} if n_boot else {}
     ranges = {k: [float(np.percentile(c, q)) for q in (2.5, 97.5)] for k, c in chosen.items()
               if n_boot and UNKNOWNS[k].numeric and all(v is not None for v in c)}
     return UnknownsFit(values=values, candidates=candidates, shares=shares, ranges=ranges,
                        n_rows=int(len(real_y)), objective=objective, n_boot=int(n_boot), edges=grid_edges(values, g),
-                       kept=kept)
+                       kept=kept, passes=n_pass)
 
 
 def grid_edges(values: Mapping[str, object], grid: Mapping[str, Sequence]) -> list[str]:
