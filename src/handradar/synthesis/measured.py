@@ -331,6 +331,8 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     (docs/datasets.md#fitting-the-motions). ``objective``: :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
+    if passes < 1:
+        raise ValueError(f"the fit needs at least one pass, found passes={passes}")
     unknown = sorted(set(grid) - set(UNKNOWNS))
     if unknown:
         raise ValueError(f"unknown fit grid entry {unknown[0]!r}; expected one of {list(UNKNOWNS)}")
@@ -437,7 +439,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
         if n_pass == passes or all(moved[k] == values[k] for k in motions):
             values = moved
             break
-        # the motions moved: the radar and processing again at them (a faster hand and a longer column trade)
+        # the motions moved: the radar and processing again at them (the speed trades against v_max and a column)
         again, chosen_radar, tried = radar_stage({k: moved[k] for k in motions})
         chosen.update(chosen_radar)
         candidates += tried
