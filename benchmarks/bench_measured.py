@@ -7,9 +7,9 @@ the reflection points' signals summed window by window (nothing cached), the cha
 (handradar.synthesis.measured.finish_rows). Unknowns at the values the measured runs use (docs/findings.md): v_max
 2.0 m/s, 35 ms a column, 64 chirps a frame (4096 chirps a row); the motions with their arm. Processing set-ups (docs/datasets.md#processing):
 Xia et al.'s manifest as it is; an MTI canceller, the central 64 of a 128-bin Doppler FFT and the strongest range
-bin; linear magnitude scaled per frame with a CA-CFAR. Needs no measured data. Each set-up runs three times and reports the
-fastest (runs of one build on the 2-core machine spread by up to 1.5x with other load). Target (issues 54, 62,
-63): >= 50 rows/s on 2 cores for each.
+bin; linear magnitude scaled per frame with a CA-CFAR. Needs no measured data. Each set-up runs three times and
+reports the fastest (runs of one build on the 2-core machine spread by up to 1.5x with other load). Target (issues
+54, 62, 63): >= 50 rows/s on 2 cores for each.
 """
 
 from __future__ import annotations

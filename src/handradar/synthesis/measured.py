@@ -323,9 +323,9 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     the radar and finish combinations are searched again at the fitted motions (a faster hand and a shorter column
     trade: the first choice was made at the prior's speed) and, where that changed them, the motions again: at most
     ``passes`` rounds of the motions' search. The bootstrap re-ranks the ``boot_candidates`` best combinations, and
-    each motion unknown's candidates; it
-    is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has fewer than 2 rows, whose every resample
-    is the same rows; a motion unknown's resamples redraw its candidates' synthetic rows too. A motion unknown leaves
+    each motion unknown's candidates; it is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has
+    fewer than 2 rows, whose every resample is the same rows; a motion unknown's resamples redraw its candidates'
+    synthetic rows too. A motion unknown leaves
     its prior only for a candidate that beats it in ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result
     names those held back): a move the rows cannot tell from the synthetic rows' own sampling is not made
     (docs/datasets.md#fitting-the-motions). ``objective``: :data:`OBJECTIVES`.
