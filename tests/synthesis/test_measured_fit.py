@@ -327,7 +327,7 @@ def test_fit_recovers_the_motions_speed(tmp_path, truth):
 
 def _blobs(speed: float, v_max: float, seed: int, n: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """n rows of one class (32 x 32): a Gaussian blob whose Doppler width is 4 speed / v_max rows and whose duration
-    is 6 / speed columns, its centre jittered by up to a pixel; what a faster hand and a slower radar trade."""
+    is 6 / speed columns, its centre jittered by up to a pixel: a faster hand and a lower v_max widen it alike."""
     rng = np.random.default_rng(seed)
     d, t = np.arange(32.0)[:, None], np.arange(32.0)[None, :]
     rows = [np.exp(-0.5 * (((d - 16 - rng.uniform(-1, 1)) / (4 * speed / v_max)) ** 2

@@ -19,10 +19,11 @@ zero row.
 
 The loop period (v_max), the time per column and the chirps a frame (zero-padded to the Doppler
 bins: fewer chirps widen every Doppler line) need a simulation each, as does each candidate of the motions'
-shared draws (speed, tremor, angle, distance, hand size: :func:`motion_ranges`), searched one at a time after them. The uncertainty is a
-bootstrap over the measured rows (classes resampled within themselves): the share of resamples that
-choose each candidate value, and the 2.5-97.5 % range of the chosen values. A numeric value chosen at the edge
-of its grid is reported as such (:func:`grid_edges`), with how to widen the grid.
+shared draws (speed, tremor, angle, distance, hand size: :func:`motion_ranges`), searched one at a time after them
+(and the radar again where they moved). The uncertainty is a bootstrap over the measured rows (classes resampled
+within themselves): the share of resamples that choose each candidate value, and the 2.5-97.5 % range of the
+chosen values. A numeric value chosen at the edge of its grid is reported as such (:func:`grid_edges`), with how to
+widen the grid.
 """
 
 from __future__ import annotations
@@ -320,15 +321,15 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     (:func:`finish_rows`) on ``processing``. The radar and finish unknowns are searched over every combination, the
     motions' draws at their prior (a motion unknown's identity, or its one candidate); then each motion unknown in
     turn (grid order) over its candidates, at the chosen radar, finish and earlier motions. Where a motion moved,
-    the radar and finish combinations are searched again at the fitted motions (a faster hand and a shorter column
-    trade: the first choice was made at the prior's speed) and, where that changed them, the motions again: at most
-    ``passes`` rounds of the motions' search. The bootstrap re-ranks the ``boot_candidates`` best combinations, and
-    each motion unknown's candidates; it is skipped (``n_boot`` 0 in the result: no uncertainty) where a class has
-    fewer than 2 rows, whose every resample is the same rows; a motion unknown's resamples redraw its candidates'
-    synthetic rows too. A motion unknown leaves
-    its prior only for a candidate that beats it in ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result
-    names those held back): a move the rows cannot tell from the synthetic rows' own sampling is not made
-    (docs/datasets.md#fitting-the-motions). ``objective``: :data:`OBJECTIVES`.
+    the radar and finish combinations are searched again at the fitted motions (the speed trades against v_max and
+    the time a column, and the first choice was made at the prior's speed) and, where that changed them, the motions
+    again: at most ``passes`` rounds of the motions' search. The bootstrap re-ranks the ``boot_candidates`` best
+    combinations, and each motion unknown's candidates; it is skipped (``n_boot`` 0 in the result: no uncertainty)
+    where a class has fewer than 2 rows, whose every resample is the same rows; a motion unknown's resamples redraw
+    its candidates' synthetic rows too. A motion unknown leaves its prior only for a candidate that beats it in
+    ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result names those held back): a move the rows cannot
+    tell from the synthetic rows' own sampling is not made (docs/datasets.md#fitting-the-motions). ``objective``:
+    :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
     if passes < 1:
