@@ -127,6 +127,47 @@ def test_pinch_closes_thumb_and_index():
     assert gap.min() < 0.5 * gap[0] and gap[-1] == pytest.approx(gap[0], abs=1e-6)
 
 
+@pytest.mark.parametrize("hold_s", [0.0, 0.4])
+def test_a_pinch_holds_closed_for_hold_s_between_closing_and_opening(hold_s):
+    """hold_s: the tips stay closed (their gap unchanged) for hold_s, between a closing and an opening of 0.3 s /
+    speed each, centred on the onset: the whole pinch lasts 0.6 s / speed + hold_s."""
+    speed = 0.75
+    seq = motion_sequence("pinch", MotionDraw(speed=speed, hold_s=hold_s, onset=0.5), duration_s=3.0)
+    gap = np.linalg.norm(seq.positions[:, 0, 4] - seq.positions[:, 0, 8], axis=-1).astype(np.float64)
+    closed = np.flatnonzero(gap < gap.min() + 1e-6)
+    assert (closed[-1] - closed[0]) / 100.0 == pytest.approx(hold_s, abs=0.03)
+    moving = np.flatnonzero(np.abs(np.diff(gap)) > 1e-7)
+    assert (moving[-1] - moving[0] + 1) / 100.0 == pytest.approx(0.6 / speed + hold_s, abs=0.03)
+    assert (moving[-1] + moving[0] + 1) / 2 / 100.0 == pytest.approx(1.5, abs=0.02)
+
+
+@pytest.mark.parametrize("name, taps", [("tap", 1), ("double_tap", 2), ("pinch", 1)])
+def test_wrist_flexion_turns_the_hand_rigidly_about_the_wrist(name, taps):
+    """wrist_flex_deg: the hand turns about the wrist as a rigid body, palm-ward (the fingers toward the radar, -z),
+    by that angle at the finger's peak; the middle fingertip (which no tap or pinch moves) then runs on a circle of
+    radius L about the wrist, and its peak speed is the closed form of a 1 - cos bump of angle theta over T
+    seconds: omega_max L = theta pi L / T (T = 0.3 s a tap at speed 1, 0.6 s a pinch)."""
+    theta, speed = 20.0, 0.8
+    still = motion_sequence(name, MotionDraw(azimuth_deg=0.0, speed=speed)).positions[:, 0].astype(np.float64)
+    bent = motion_sequence(name, MotionDraw(azimuth_deg=0.0, speed=speed, wrist_flex_deg=theta)).positions[:, 0]
+    bent = bent.astype(np.float64)
+    wrist = bent[:, 0]
+    assert np.abs(wrist - still[:, 0]).max() < 1e-6                        # the wrist stays where it was
+    dist = np.linalg.norm(bent - wrist[:, None], axis=-1) - np.linalg.norm(still - still[:, :1], axis=-1)
+    assert np.abs(dist).max() < 1e-5                                       # every joint keeps its distance
+    rest, tip = still[:, 12] - still[:, :1][:, 0], bent[:, 12] - wrist
+    turned = np.degrees(np.arccos(np.clip((rest * tip).sum(-1) / np.linalg.norm(rest, axis=-1)
+                                          / np.linalg.norm(tip, axis=-1), -1, 1)))
+    assert turned.max() == pytest.approx(theta, abs=0.05)
+    assert bent[:, 12, 2].min() < still[:, 12, 2].min() - 0.01             # toward the radar
+    length = np.linalg.norm(rest[0])
+    period = (0.3 if name != "pinch" else 0.6) / speed
+    tip_speed = np.linalg.norm(np.diff(bent[:, 12], axis=0), axis=-1) * 100.0  # 100 Hz steps
+    assert tip_speed.max() == pytest.approx(np.deg2rad(theta) * np.pi * length / period, rel=0.02)
+    peaks = np.flatnonzero((turned[1:-1] > turned[:-2]) & (turned[1:-1] >= turned[2:]) & (turned[1:-1] > theta / 2))
+    assert len(peaks) == taps
+
+
 def test_circles_turn_opposite_ways():
     """circle_ccw turns counter-clockwise in the (x, z) plane (x right, z up): its velocity turns left, the
     cross product of consecutive velocities is positive wherever it moves; circle_cw the opposite."""

@@ -9,7 +9,9 @@ procedural program on the open standard hand (:func:`handradar.hand.retarget.sta
   runs along -x / +x / +y / -y of the radar frame (the board's azimuth axis and its forward axis);
 - ``push`` / ``pull``: the hand translates toward / away from the radar along the line of sight;
 - ``tap`` / ``double_tap``: the index finger flexes toward the radar and back, once or twice;
-- ``pinch``: thumb and index tips close and open again;
+- ``pinch``: thumb and index tips close, hold ``hold_s`` closed and open again;
+- a tap or pinch may flex the wrist with it (``wrist_flex_deg`` at the finger's peak): the whole hand turns palm-ward
+  about the wrist's lateral axis, its fingers toward the radar, with the finger's own profile;
 - ``circle_cw`` / ``circle_ccw``: the hand circles ``turns`` turns (1.5 unless drawn otherwise) in the plane
   holding the line of sight and x, clockwise or counter-clockwise with x to the right and the line of sight up;
 - ``idle``: the hand holds still with a physiological tremor (about 1 mm, 8-12 Hz); any other motion
@@ -43,8 +45,9 @@ import numpy as np
 from handradar.hand.retarget import standard_hand
 from handradar.hand.skeleton import N_JOINTS, HandSequence
 
-# Raised whenever a motion's kinematics change (2: the arm, swipes swung about the elbow, circles' turns drawn).
-MOTIONS_VERSION = 2
+# Raised whenever a motion's kinematics change (2: the arm, swipes swung about the elbow, circles' turns drawn; 3: wrist
+# flexion in taps and pinches).
+MOTIONS_VERSION = 3
 MOTIONS: tuple[str, ...] = ("swipe_left", "swipe_right", "swipe_up", "swipe_down", "push", "pull", "tap",
                             "double_tap", "pinch", "circle_cw", "circle_ccw", "idle", "random")
 
@@ -61,6 +64,8 @@ DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "elbow_out_deg": (30.0, 60.0), # the arm turned about the vertical toward the hand's side (chosen on validation)
     "wrist_share": (0.0, 0.4),     # share of a swipe's angle turned at the wrist (the rest at the elbow)
     "turns": (1.5, 1.5),           # a circle's turns
+    "wrist_flex_deg": (0.0, 0.0),  # a tap's or pinch's wrist flexion at the finger's peak (the hand palm-ward)
+    "hold_s": (0.0, 0.0),          # a pinch held closed between closing and opening
 }
 SWIPE_M = 0.20          # swipe and push/pull length at amplitude 1
 SWIPE_S = 0.5           # swipe duration at speed 1
@@ -99,6 +104,8 @@ class MotionDraw:
     elbow_out_deg: float = 0.0
     wrist_share: float = 0.0
     turns: float = 1.5
+    wrist_flex_deg: float = 0.0
+    hold_s: float = 0.0
 
     @classmethod
     def draw(cls, rng: np.random.Generator, ranges: Mapping[str, tuple[float, float]] | None = None) -> MotionDraw:
@@ -141,6 +148,12 @@ def _flex_index(joints: np.ndarray, angle: np.ndarray) -> np.ndarray:
         moving = list(INDEX[k + 1:])
         out[:, moving] = _rotate(out[:, moving], pivot, lateral, -share * angle)
     return out
+
+
+def _flex_wrist(joints: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """The whole hand turned palm-ward about the wrist's lateral axis by ``angle`` (T,) radians: the fingers (+y)
+    toward the palm's side (-z), as the index flexes in :func:`_flex_index`."""
+    return _rotate(joints, joints[:, :1], np.array([1.0, 0.0, 0.0]), -angle)
 
 
 def _pinch(joints: np.ndarray, closure: np.ndarray) -> np.ndarray:
@@ -264,8 +277,14 @@ def motion_sequence(name: str, draw: MotionDraw, *, duration_s: float = 3.2, rat
         s = tau(n * TAP_S / draw.speed) * n
         flex = bump(s - np.floor(np.clip(s, 0, n - 1e-9))) * ((s >= 0) & (s <= n))
         joints = _flex_index(joints, np.deg2rad(TAP_DEG) * draw.amplitude * flex)
+        joints = _flex_wrist(joints, np.deg2rad(draw.wrist_flex_deg) * flex)
     elif name == "pinch":
-        joints = _pinch(joints, bump(tau(2 * TAP_S / draw.speed)))
+        # closing and opening each half a tap's bump (TAP_S / speed), held closed for hold_s between them
+        half = TAP_S / draw.speed
+        s = t - mid + half + draw.hold_s / 2  # seconds since the pinch began
+        closure = np.where(s < half, bump(s / (2 * half)),
+                           np.where(s < half + draw.hold_s, 1.0, bump((s - draw.hold_s) / (2 * half))))
+        joints = _flex_wrist(_pinch(joints, closure), np.deg2rad(draw.wrist_flex_deg) * closure)
     elif name in ("circle_cw", "circle_ccw"):
         turns = draw.turns
         s = np.clip(tau(turns * CIRCLE_S / draw.speed), 0, 1)
