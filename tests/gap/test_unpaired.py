@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 
 from handradar.gap.unpaired import (
+    burst_count,
+    burst_span,
     cohen_d,
     doppler_centroid,
+    doppler_reach,
     doppler_spread,
     moving_share,
     unpaired_gap,
@@ -32,6 +35,25 @@ def test_statistics_closed_forms():
     z[0, 15:18] = 1.0                              # the zero band only
     assert zero_band_share(z)[0] == pytest.approx(1.0)
     assert cohen_d(np.array([0.0, 2.0]), np.array([2.0, 4.0])) == pytest.approx(2.0 / np.sqrt(2.0))
+
+
+def test_bursts_and_reach_of_known_lobes():
+    """Lobes of known place: Gaussian in time (sigma 2 columns) and in Doppler (sigma 2 rows) over a background
+    of 0.1 with small noise. Two lobes of height 1 at columns 20 and 38 (and one of 0.2 at column 50, below the
+    prominence) are 2 bursts 18 columns apart; a lobe centred 12 rows from zero reaches the last row where the
+    Gaussian stays above half its height: 12 + floor(2 sqrt(2 ln 2)) = 14 rows."""
+    rows, cols = np.arange(64)[:, None] - 32, np.arange(64)[None, :]
+    rng = np.random.default_rng(0)
+
+    def lobe(row: float, col: float, height: float = 1.0) -> np.ndarray:
+        return height * np.exp(-((rows - row) ** 2 + (cols - col) ** 2) / 8.0)
+
+    x = 0.1 + lobe(12, 20) + lobe(-9, 38) + lobe(8, 50, 0.2) + rng.uniform(0, 0.01, (64, 64))
+    assert burst_count(x[None])[0] == 2 and burst_span(x[None])[0] == 18
+    assert doppler_reach(x[None])[0] == 12 + np.floor(2 * np.sqrt(2 * np.log(2)))
+    one = 0.1 + lobe(-6, 30) + rng.uniform(0, 0.01, (64, 64))
+    assert burst_count(one[None])[0] == 1 and burst_span(one[None])[0] == 0 and doppler_reach(one[None])[0] == 8
+    assert burst_count(np.full((2, 64, 64), 0.1)).tolist() == [0, 0]    # nothing moves: no burst, no reach
 
 
 def test_report_names_the_shifted_class_and_statistic(tmp_path):
