@@ -40,6 +40,8 @@ def test_measured_job(tmp_path):
     assert fit["values"]["approaching"] == TRUTH["approaching"] and fit["values"]["v_max_m_s"] == TRUTH["v_max_m_s"]
     report = json.loads((run_dir / "unpaired_gap.json").read_text())
     assert set(report["classes"]) == {"push", "pull", "swipe"} and (run_dir / "figures" / "class_means.png").is_file()
+    assert {f"confusion_{v}_{part}.png" for v in variants for part in ("val", "test")} <= {
+        f.name for f in (run_dir / "figures").iterdir()}
     # K = 0: synthetic only; the fit is reused from its cache
     cfg0 = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", "split.per_class=0"))
     metrics0 = json.loads((run(cfg0, tmp_path / "run0") / "metrics.json").read_text())

@@ -27,7 +27,8 @@ network (``model``) and training recipe (``recipe``), so that a difference betwe
 
 Metrics: ``val/acc_<variant>`` and ``test/acc_<variant>_<split>`` for each test split; the parameters
 ``measured.per_class``, ``measured.variants`` and ``measured.tests`` say which (handradar.runs.tables reads them).
-The run folder also holds the unpaired gap report of the synthetic rows against the pool (handradar.gap.unpaired: a
+The run folder holds each variant's confusion matrix on validation and on each test split
+(``figures/confusion_<variant>_<split>.png``), and the unpaired gap report of the synthetic rows against the pool (handradar.gap.unpaired: a
 report that chooses nothing), naming per class the processing step that, switched on alone, explains most of the
 difference.
 """
@@ -66,6 +67,7 @@ from handradar.synthesis.measured import (
 )
 from handradar.tasks.classify import evaluate, recompute_bn_stats
 from handradar.tasks.train import Job, job_hash
+from handradar.viz.confusion import plot_confusion
 from handradar.vocab import MEASURED_VARIANTS
 
 log = logging.getLogger(__name__)
@@ -328,6 +330,12 @@ def run_measured(job: Job) -> dict[str, float]:
                                                      "n_real": int(len(rows.train)), "classes": job.real.classes})
         r = result["scores"]
         log.info("%s: validation %.3f; %s", name, r["val"]["acc"], ", ".join(f"test {s} {r[s]['acc']:.3f}" for s in rows.tests))
+        if job.rank_zero:  # which classes each variant confuses, on validation and each test split
+            for part, scores in r.items():
+                png = plot_confusion(np.asarray(scores["confusion"]), job.real.classes,
+                                     job.run_dir / "figures" / f"confusion_{name}_{part}.png",
+                                     title=f"{name}, K = {setup.per_class}, {part}, seed {job.seed}")
+                job.tracker.log_artifact(png, "figures")
         metrics[f"val/acc_{name}"] = r["val"]["acc"]
         metrics.update({f"test/acc_{name}_{s}": r[s]["acc"] for s in rows.tests})
     return metrics
