@@ -46,7 +46,7 @@ from handradar.hand.retarget import standard_hand
 from handradar.hand.skeleton import N_JOINTS, HandSequence
 
 # Raised whenever a motion's kinematics change (2: the arm, swipes swung about the elbow, circles' turns drawn; 3: wrist
-# flexion in taps and pinches).
+# flexion in taps and pinches, a pinch's hold).
 MOTIONS_VERSION = 3
 MOTIONS: tuple[str, ...] = ("swipe_left", "swipe_right", "swipe_up", "swipe_down", "push", "pull", "tap",
                             "double_tap", "pinch", "circle_cw", "circle_ccw", "idle", "random")

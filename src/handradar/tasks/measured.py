@@ -28,9 +28,9 @@ network (``model``) and training recipe (``recipe``), so that a difference betwe
 Metrics: ``val/acc_<variant>`` and ``test/acc_<variant>_<split>`` for each test split; the parameters
 ``measured.per_class``, ``measured.variants`` and ``measured.tests`` say which (handradar.runs.tables reads them).
 The run folder holds each variant's confusion matrix on validation and on each test split
-(``figures/confusion_<variant>_<split>.png``), and the unpaired gap report of the synthetic rows against the pool (handradar.gap.unpaired: a
-report that chooses nothing), naming per class the processing step that, switched on alone, explains most of the
-difference.
+(``figures/confusion_<variant>_<split>.png``), and the unpaired gap report of the synthetic rows against the pool
+(handradar.gap.unpaired: a report that chooses nothing), naming per class the processing step that, switched on
+alone, explains most of the difference.
 """
 
 from __future__ import annotations
