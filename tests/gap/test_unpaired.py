@@ -76,6 +76,7 @@ def test_report_names_the_shifted_class_and_statistic(tmp_path):
     assert [f.name for f in files] == ["unpaired_gap.json", "unpaired_gap.md", "class_means.png"]
     assert json.loads(files[0].read_text())["largest"][0]["class"] == "c"
     assert "| c | doppler_centroid |" in files[1].read_text()
+    assert "| class | doppler_reach | burst_count | burst_span |" in files[1].read_text()
     with pytest.raises(ValueError, match="class 'c' has 20 measured and 0 synthetic rows"):
         unpaired_gap(real, labels, synth[:40], labels[:40], ["a", "b", "c"])
 

@@ -112,6 +112,7 @@ STATISTICS: dict[str, tuple[Callable[[np.ndarray], np.ndarray], str]] = {
     "burst_count": (burst_count, "bursts of motion off the zero band (a double-click 2, a circle its turns)"),
     "burst_span": (burst_span, "columns from the first burst's peak to the last's"),
 }
+MOTION_STATISTICS = ("doppler_reach", "burst_count", "burst_span")  # the report's table of the motion's own terms
 
 
 def cohen_d(a: np.ndarray, b: np.ndarray) -> float:
@@ -155,7 +156,8 @@ def unpaired_gap(real_x: np.ndarray, real_y: np.ndarray, synth_x: np.ndarray, sy
 
 
 def markdown(report: dict) -> str:
-    """The report as a markdown page: the class-mean gaps, then the statistics that differ most."""
+    """The report as a markdown page: the class-mean gaps, the motion's own terms, then the statistics that differ
+    most."""
     lines = ["# Unpaired gap: measured vs synthetic", "",
              "Per class: 1 - SSIM of the class-mean and class-spread images (0: identical; the fit's objective).",
              "Then the statistics whose synthetic and measured values differ most (Cohen's d: synthetic minus",
@@ -170,6 +172,13 @@ def markdown(report: dict) -> str:
                   "| class | fitted chain | step explaining most | its 1 - SSIM |", "|---|---|---|---|"]
         lines += [f"| {c} | {e['mean_image_gap']:.3f} | {e['explained_by'] or 'none'} | "
                   f"{e['steps'][e['explained_by']] if e['explained_by'] else min(e['steps'].values()):.3f} |"
+                  for c, e in report["classes"].items()]
+    motion = [k for k in MOTION_STATISTICS if k in report["statistics"]]
+    if motion:
+        lines += ["", "The motion in its own terms, per class: measured / synthetic means over the rows.", "",
+                  "| class | " + " | ".join(motion) + " |", "|---|" + "---|" * len(motion)]
+        lines += [f"| {c} | " + " | ".join(f"{e['statistics'][k]['measured']:.1f} / "
+                                          f"{e['statistics'][k]['synthetic']:.1f}" for k in motion) + " |"
                   for c, e in report["classes"].items()]
     lines += ["", "| class | statistic | measured | synthetic | d |", "|---|---|---|---|---|"]
     lines += [f"| {r['class']} | {r['statistic']} | {r['measured']:.3f} | {r['synthetic']:.3f} | {r['d']:+.2f} |"
