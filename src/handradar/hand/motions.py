@@ -81,6 +81,7 @@ UPPER_ARM_DEG = 60.0    # the upper arm runs from the elbow away from the radar,
 INDEX = (5, 6, 7, 8)    # MCP, PIP, DIP, tip
 CENTRE = (0, 5, 9, 13, 17)  # the hand centre: wrist and finger MCPs
 THUMB = (1, 2, 3, 4)
+LATERAL = np.array([1.0, 0.0, 0.0])  # fingers along +y, palm facing -z: flexion about it turns +y toward -z
 
 
 def library_key() -> dict:
@@ -142,18 +143,17 @@ def _rotate(points: np.ndarray, pivot: np.ndarray, axis: np.ndarray, angle: np.n
 def _flex_index(joints: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Index finger flexed toward the palm side by ``angle`` (T,) radians, split 50/30/20 over MCP, PIP, DIP."""
     out = joints.copy()
-    lateral = np.array([1.0, 0.0, 0.0])  # fingers along +y, palm facing -z: flexion turns +y toward -z
     for share, k in zip((0.5, 0.3, 0.2), range(3)):
         pivot = out[:, INDEX[k]][:, None, :]
         moving = list(INDEX[k + 1:])
-        out[:, moving] = _rotate(out[:, moving], pivot, lateral, -share * angle)
+        out[:, moving] = _rotate(out[:, moving], pivot, LATERAL, -share * angle)
     return out
 
 
 def _flex_wrist(joints: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """The whole hand turned palm-ward about the wrist's lateral axis by ``angle`` (T,) radians: the fingers (+y)
     toward the palm's side (-z), as the index flexes in :func:`_flex_index`."""
-    return _rotate(joints, joints[:, :1], np.array([1.0, 0.0, 0.0]), -angle)
+    return _rotate(joints, joints[:, :1], LATERAL, -angle)
 
 
 def _pinch(joints: np.ndarray, closure: np.ndarray) -> np.ndarray:
