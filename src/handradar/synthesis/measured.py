@@ -20,8 +20,8 @@ zero row.
 The loop period (v_max), the time per column and the chirps a frame (zero-padded to the Doppler
 bins: fewer chirps widen every Doppler line) need a simulation each, as does each candidate of the motions'
 shared draws (speed, tremor, angle, distance, hand size: :func:`motion_ranges`), searched one at a time after them
-(and the radar again where they moved). The uncertainty is a bootstrap over the measured rows (classes resampled
-within themselves): the share of resamples that choose each candidate value, and the 2.5-97.5 % range of the
+(and the radar again where they moved). The uncertainty is a bootstrap over the measured rows and the synthetic
+ones (classes resampled within themselves): the share of resamples that choose each candidate value, and the 2.5-97.5 % range of the
 chosen values. A numeric value chosen at the edge of its grid is reported as such (:func:`grid_edges`), with how to
 widen the grid.
 """
@@ -54,7 +54,8 @@ from handradar.synthesis.providers import synthesize_source
 log = logging.getLogger(__name__)
 
 DEEP_FLOOR_DB = 60.0  # the floor rows are synthesised at before the fit re-floors them
-FIT_VERSION = 3  # raised whenever fit_unknowns chooses otherwise (2: motion unknowns; 3: passes): no stale cached fit
+FIT_VERSION = 4  # raised whenever fit_unknowns chooses or reports otherwise (2: motion unknowns; 3: passes; 4: the
+# radar's resamples redraw the synthetic rows): no stale cached fit
 PRIOR_KEPT_BELOW = 0.975  # a motion unknown leaves its prior only when its best beats it in this share of resamples
 OBJECTIVES = {  # what fit_unknowns compares, 1 - SSIM averaged over its images
     "means": "1 - SSIM of class-mean images, mean over classes",
@@ -325,8 +326,8 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     the time a column, and the first choice was made at the prior's speed) and, where that changed them, the motions
     again: at most ``passes`` rounds of the motions' search. The bootstrap re-ranks the ``boot_candidates`` best
     combinations, and each motion unknown's candidates; it is skipped (``n_boot`` 0 in the result: no uncertainty)
-    where a class has fewer than 2 rows, whose every resample is the same rows; a motion unknown's resamples redraw
-    its candidates' synthetic rows too. A motion unknown leaves its prior only for a candidate that beats it in
+    where a class has fewer than 2 rows, whose every resample is the same rows; each resample redraws the
+    candidates' synthetic rows too (the same rows for every candidate). A motion unknown leaves its prior only for a candidate that beats it in
     ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result names those held back): a move the rows cannot
     tell from the synthetic rows' own sampling is not made (docs/datasets.md#fitting-the-motions). ``objective``:
     :data:`OBJECTIVES`.
@@ -357,10 +358,18 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                  (np.concatenate([rng.choice(m, size=len(m)) for m in members]) for _ in range(n_boot))]
     real_moments = class_moments(real_x, real_y, n_classes, objective)
 
+    synth_rng = np.random.default_rng([seed, 1])  # the synthetic rows' resamples: the measured ones' stay as they were
+
+    def redraws(y: np.ndarray) -> list[np.ndarray]:
+        """One redraw of synthetic rows labelled ``y`` per resample, each class within itself: the same rows for every
+        candidate, whose motion draws are shared, so that their own sampling moves a close ranking."""
+        members = [np.flatnonzero(y == c) for c in range(n_classes)]
+        return [np.concatenate([synth_rng.choice(m, size=len(m)) for m in members]) for _ in resamples]
+
     def radar_stage(motion_values: dict) -> tuple[dict, dict, list[dict]]:
         """Every combination of the radar and finish unknowns at ``motion_values``: the best, each resample's
         choices by unknown, and every candidate with its objective."""
-        combos, synth_moments = [], []
+        combos, synth_moments, simulated, made_by = [], [], [], []
         for radar_values in itertools.product(*(g[k] for k in radar_keys)):
             radar = {k: (v if v is None or not UNKNOWNS[k].numeric else int(v) if UNKNOWNS[k].kind == "count"
                          else float(v)) for k, v in zip(radar_keys, radar_values)}
@@ -368,6 +377,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
             if made is None:
                 continue
             x, y = made
+            simulated.append((x, np.asarray(y)))
             for rest in itertools.product(*(g[k] for k in finished)):
                 values = {**radar, **dict(zip(finished, rest))}
                 if values.get("noise_db") is None and values.get("noise_looks", 1) != g.get("noise_looks", [1])[0]:
@@ -378,19 +388,26 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                 values = {k: (int(v) if k == "noise_looks" else float(v) if isinstance(v, (int, float)) else v)
                           for k, v in values.items()}
                 combos.append({**values, **motion_values})
+                made_by.append(len(simulated) - 1)
                 synth_moments.append(class_moments(finish_rows(x, values, seed, processing), y, n_classes, objective))
         if not combos:
             raise ValueError("no candidate of the grid could be simulated")
         synth_moments = np.stack(synth_moments)  # (combos, classes or 2 classes, doppler, columns)
         gaps = objectives(real_moments, synth_moments)
         # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
-        # behind on all rows is not chosen by a resample of them
+        # behind on all rows is not chosen by a resample of them; each redraws the measured and the synthetic rows
         contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
-        winners = [combos[contenders[np.argmin(objectives(r, synth_moments[contenders]))]] for r in resamples]
+        rows = [(finish_rows(simulated[made_by[i]][0], {k: v for k, v in combos[i].items() if k not in motions}, seed,
+                             processing), simulated[made_by[i]][1]) for i in contenders]
+        y = rows[0][1]
+        if any(not np.array_equal(y, other) for _, other in rows):
+            raise ValueError("the candidates' synthetic rows differ in their labels: simulate must draw the same rows")
+        picks = redraws(y)
+        winners = [combos[contenders[np.argmin(objectives(r, np.stack([class_moments(x[pick], y[pick], n_classes,
+                                                                                      objective) for x, _ in rows])))]]
+                   for r, pick in zip(resamples, picks)]
         return (dict(combos[int(np.argmin(gaps))]), {k: [w[k] for w in winners] for k in g if k not in motions},
                 [{**c, "gap": float(gap)} for c, gap in zip(combos, gaps)])
-
-    synth_rng = np.random.default_rng([seed, 1])  # the synthetic rows' resamples: the measured ones' stay as they were
 
     def motion_stage(values: dict) -> tuple[dict, dict, dict, list[dict]]:
         """Each motion unknown in turn over its candidates at ``values``: the values after it, each resample's
@@ -417,10 +434,8 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
             # each resample redraws the measured rows and, the same for every candidate (their draws are shared), the
             # synthetic rows: a motion's candidates lie close, and the synthetic rows' own sampling moves their ranking
             y = made_rows[0][1]
-            synth_members = [np.flatnonzero(y == c) for c in range(n_classes)]
             boot = np.zeros((len(resamples), len(tried)))
-            for i, real_r in enumerate(resamples):
-                pick = np.concatenate([synth_rng.choice(m, size=len(m)) for m in synth_members])
+            for i, (real_r, pick) in enumerate(zip(resamples, redraws(y))):
                 boot[i] = objectives(real_r, np.stack([class_moments(x[pick], y[pick], n_classes, objective)
                                                        for x, _ in made_rows]))
             chosen[name] = [tried[i] for i in boot.argmin(axis=1)]
