@@ -18,23 +18,16 @@ Public API:
     per_example_ssim(measured, simulated) -> (N,) numpy;  per_example_mse(measured, simulated) -> (N,)
     gap_closed(ssim_before, ssim_after) -> float
     bootstrap_gap_closed(...) -> Bootstrap;  bootstrap_difference(...) -> (difference, 95 % CI)
-
-Statistics of one (doppler, columns) image in [0, 1], zero Doppler at row n // 2 (:data:`STATISTICS`: level, floor,
-Doppler centroid and spread, zero band, motion's columns, reach and bursts), each (..., doppler, columns) -> (...):
-the unpaired gap report's (handradar.gap.unpaired) and the unpaired fit's ``rows`` objective
-(handradar.synthesis.measured); ``cohen_d`` ranks them.
 """
 
 from __future__ import annotations
 
 import contextlib
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.signal import find_peaks
 from torchmetrics.functional.image import structural_similarity_index_measure
 
 DATA_RANGE = 1.0
@@ -161,101 +154,3 @@ def bootstrap_difference(ssim_before: np.ndarray, ssim_a: np.ndarray, ssim_b: np
     diff = ((1.0 - b[idx].mean(axis=1)) - (1.0 - a[idx].mean(axis=1))) / safe
     lo, hi = np.percentile(diff, [2.5, 97.5])
     return gap_closed(before, a) - gap_closed(before, b), (float(lo), float(hi))
-
-
-ZERO_BAND = 2  # rows either side of zero Doppler counted as the zero-Doppler band
-BURST_PROMINENCE = 0.3  # a burst's peak stands out of the off-band energy by this share of the image's largest
-BURST_APART = 5  # columns at least between two bursts' peaks
-
-
-def _weights(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Doppler row offsets from zero (rows - n // 2) and each image's Doppler profile (summed over time)."""
-    n = x.shape[-2]
-    rows = np.arange(n) - n // 2
-    profile = x.sum(axis=-1)
-    return rows, profile / np.maximum(profile.sum(axis=-1, keepdims=True), 1e-12)
-
-
-def doppler_centroid(x: np.ndarray) -> np.ndarray:
-    rows, p = _weights(x)
-    return (p * rows).sum(axis=-1)
-
-
-def doppler_spread(x: np.ndarray) -> np.ndarray:
-    rows, p = _weights(x)
-    centre = (p * rows).sum(axis=-1, keepdims=True)
-    return np.sqrt((p * (rows - centre) ** 2).sum(axis=-1))
-
-
-def zero_band_share(x: np.ndarray) -> np.ndarray:
-    rows, p = _weights(x)
-    return p[..., np.abs(rows) <= ZERO_BAND].sum(axis=-1)
-
-
-def _off_band(x: np.ndarray) -> np.ndarray:
-    """Each column's energy off the zero band (..., columns)."""
-    n = x.shape[-2]
-    return np.delete(x, np.arange(n // 2 - ZERO_BAND, n // 2 + ZERO_BAND + 1), axis=-2).sum(axis=-2)
-
-
-def moving_share(x: np.ndarray) -> np.ndarray:
-    """Share of columns whose energy off the zero band exceeds half of the image's largest such column."""
-    off = _off_band(x)
-    return (off > 0.5 * off.max(axis=-1, keepdims=True)).mean(axis=-1)
-
-
-def _bursts(x: np.ndarray) -> list[np.ndarray]:
-    """Per image, the columns where its bursts of motion peak: the maxima of the off-band energy (the column's
-    background, its median over the image, taken off; smoothed over 3 columns) that stand out of it by at least
-    ``BURST_PROMINENCE`` of its largest, at least ``BURST_APART`` columns apart."""
-    off = _off_band(x.reshape(-1, *x.shape[-2:]))
-    off = np.clip(off - np.median(off, axis=-1, keepdims=True), 0.0, None)
-    kernel = np.ones(3) / 3
-    out = []
-    for e in off:
-        e = np.convolve(e, kernel, mode="same")
-        peaks, _ = find_peaks(e, prominence=BURST_PROMINENCE * max(e.max(), 1e-12), distance=BURST_APART)
-        out.append(peaks)
-    return out
-
-
-def burst_count(x: np.ndarray) -> np.ndarray:
-    """How many bursts of motion each image holds (:func:`_bursts`): a tap 1, a double-click 2, a circle its turns."""
-    return np.array([len(p) for p in _bursts(x)], dtype=np.float64).reshape(x.shape[:-2])
-
-
-def burst_span(x: np.ndarray) -> np.ndarray:
-    """Columns from each image's first burst peak to its last (0: one burst or none): how far apart repetitions lie."""
-    return np.array([p[-1] - p[0] if len(p) else 0 for p in _bursts(x)], dtype=np.float64).reshape(x.shape[:-2])
-
-
-def doppler_reach(x: np.ndarray) -> np.ndarray:
-    """Rows from zero Doppler out to the farthest row whose brightest pixel stands half-way from the image's median
-    (its background) to its peak: how fast the fastest part of the motion gets, in Doppler rows."""
-    n = x.shape[-2]
-    rows = np.abs(np.arange(n) - n // 2)
-    level = np.median(x, axis=(-2, -1), keepdims=True)[..., 0]
-    brightest = x.max(axis=-1)
-    lit = brightest > level + 0.5 * (brightest.max(axis=-1, keepdims=True) - level)
-    return np.where(lit, rows, 0).max(axis=-1).astype(np.float64)
-
-
-STATISTICS: dict[str, tuple[Callable[[np.ndarray], np.ndarray], str]] = {
-    "mean_level": (lambda x: x.mean(axis=(-2, -1)), "mean value of the image (0: floor, 1: peak)"),
-    "floor_share": (lambda x: (x <= 1e-3).mean(axis=(-2, -1)), "share of pixels at the dB floor"),
-    "doppler_centroid": (doppler_centroid, "energy-weighted Doppler row offset from zero (+: approaching)"),
-    "doppler_spread": (doppler_spread, "energy-weighted standard deviation of the Doppler row"),
-    "zero_band_share": (zero_band_share, f"share of the energy within {ZERO_BAND} rows of zero Doppler"),
-    "moving_share": (moving_share, "share of the columns holding motion off the zero band"),
-    "doppler_reach": (doppler_reach, "rows from zero Doppler that the motion reaches at half the image's peak"),
-    "burst_count": (burst_count, "bursts of motion off the zero band (a double-click 2, a circle its turns)"),
-    "burst_span": (burst_span, "columns from the first burst's peak to the last's"),
-}
-MOTION_STATISTICS = ("doppler_reach", "burst_count", "burst_span")  # the report's table of the motion's own terms
-
-
-def cohen_d(a: np.ndarray, b: np.ndarray) -> float:
-    """(mean b - mean a) / pooled standard deviation; 0 where both are constant and equal."""
-    pooled = float(np.sqrt(0.5 * (a.var(ddof=1) + b.var(ddof=1)))) if len(a) > 1 and len(b) > 1 else 0.0
-    diff = float(b.mean() - a.mean())
-    return diff / pooled if pooled > 0 else (0.0 if diff == 0 else float(np.sign(diff)) * np.inf)

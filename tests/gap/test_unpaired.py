@@ -1,5 +1,4 @@
-"""The unpaired gap report (handradar.gap.unpaired): its statistics (handradar.metrics) against closed forms, and its
-ranking."""
+"""The unpaired gap report (handradar.gap.unpaired): its statistics against closed forms, and its ranking."""
 
 from __future__ import annotations
 
@@ -8,8 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from handradar.gap.unpaired import unpaired_gap, write_unpaired_gap
-from handradar.metrics import (
+from handradar.gap.unpaired import (
     burst_count,
     burst_span,
     cohen_d,
@@ -17,6 +15,8 @@ from handradar.metrics import (
     doppler_reach,
     doppler_spread,
     moving_share,
+    unpaired_gap,
+    write_unpaired_gap,
     zero_band_share,
 )
 

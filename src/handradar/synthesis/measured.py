@@ -45,7 +45,7 @@ from handradar.atomic import atomic_path
 from handradar.data.measured import PROCESSING, RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
 from handradar.data.unknowns import MOTION, UNKNOWN, UNKNOWNS
 from handradar.hand.motions import DEFAULT_RANGES, library_key
-from handradar.metrics import STATISTICS, per_example_ssim
+from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
 from handradar.radar.chain import ChainConfig, power_to_unit
 from handradar.radar.config import RadarConfig
@@ -57,11 +57,9 @@ DEEP_FLOOR_DB = 60.0  # the floor rows are synthesised at before the fit re-floo
 FIT_VERSION = 4  # raised whenever fit_unknowns chooses or reports otherwise (2: motion unknowns; 3: passes; 4: the
 # radar's resamples redraw the synthetic rows): no stale cached fit
 PRIOR_KEPT_BELOW = 0.975  # a motion unknown leaves its prior only when its best beats it in this share of resamples
-OBJECTIVES = {  # what fit_unknowns compares
+OBJECTIVES = {  # what fit_unknowns compares, 1 - SSIM averaged over its images
     "means": "1 - SSIM of class-mean images, mean over classes",
     "moments": "1 - SSIM of class-mean and class-spread images, mean over both and over classes",
-    "rows": "|difference| of the class means of each row's statistics, in the measured rows' standard deviations, "
-            "mean over statistics and classes",
 }
 
 
@@ -239,19 +237,10 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     return finished
 
 
-def row_features(x: np.ndarray, objective: str = "means") -> np.ndarray:
-    """What ``objective`` compares of each row: the image itself, or for "rows" its statistics (n, statistics:
-    handradar.metrics.STATISTICS), which see each row's reach, bursts and duration where a class mean blurs them."""
-    if objective not in OBJECTIVES:
-        raise ValueError(f"unknown fit objective {objective!r}; expected one of {sorted(OBJECTIVES)}")
-    return np.stack([fn(x) for fn, _ in STATISTICS.values()], axis=-1) if objective == "rows" else x
-
-
 def class_moments(x: np.ndarray, y: np.ndarray, n_classes: int, objective: str = "means") -> np.ndarray:
     """Each class's mean image (n_classes, doppler, columns), then, for ``objective`` "moments", its per-pixel
-    standard deviation (2 n_classes images: the spread tells a noise floor's texture apart from its level); for
-    "rows", ``x`` holds the rows' statistics (:func:`row_features`) and the result is their class means
-    (n_classes, statistics). A class without rows is an error."""
+    standard deviation (2 n_classes images: the spread tells a noise floor's texture apart from its level); a class
+    without rows is an error."""
     if objective not in OBJECTIVES:
         raise ValueError(f"unknown fit objective {objective!r}; expected one of {sorted(OBJECTIVES)}")
     counts = np.bincount(y, minlength=n_classes)
@@ -355,15 +344,8 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     motions = {k: float(g[k][0]) if len(g[k]) == 1 else UNKNOWNS[k].identity
                for k in g if UNKNOWNS[k].stage == "motion"}
 
-    real_f = row_features(real_x, objective)
-    # a statistic's unit: its standard deviation over every measured row (a class's alone may be 0)
-    unit = np.maximum(real_f.std(axis=0), 1e-6) if objective == "rows" else None
-
     def objectives(real_moments: np.ndarray, synth: np.ndarray) -> np.ndarray:
-        """The objective of each candidate's moments ``synth`` (candidates, images, doppler, columns; for "rows"
-        candidates, classes, statistics)."""
-        if unit is not None:
-            return (np.abs(synth - real_moments) / unit).mean(axis=(1, 2))
+        """The objective of each candidate's moments ``synth`` (candidates, images, doppler, columns)."""
         flat = np.broadcast_to(real_moments, synth.shape).reshape(-1, *real_moments.shape[-2:]).copy()
         s = per_example_ssim(flat, synth.reshape(-1, *real_moments.shape[-2:])).reshape(len(synth), -1)
         return 1.0 - s.mean(axis=1)
@@ -372,9 +354,9 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     if min(len(m) for m in members) < 2:
         n_boot = 0
     rng = np.random.default_rng(seed)
-    resamples = [class_moments(real_f[rows], real_y[rows], n_classes, objective) for rows in
+    resamples = [class_moments(real_x[rows], real_y[rows], n_classes, objective) for rows in
                  (np.concatenate([rng.choice(m, size=len(m)) for m in members]) for _ in range(n_boot))]
-    real_moments = class_moments(real_f, real_y, n_classes, objective)
+    real_moments = class_moments(real_x, real_y, n_classes, objective)
 
     synth_rng = np.random.default_rng([seed, 1])  # the synthetic rows' resamples: the measured ones' stay as they were
 
@@ -407,8 +389,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                           for k, v in values.items()}
                 combos.append({**values, **motion_values})
                 made_by.append(len(simulated) - 1)
-                synth_moments.append(class_moments(row_features(finish_rows(x, values, seed, processing), objective), y,
-                                                   n_classes, objective))
+                synth_moments.append(class_moments(finish_rows(x, values, seed, processing), y, n_classes, objective))
         if not combos:
             raise ValueError("no candidate of the grid could be simulated")
         synth_moments = np.stack(synth_moments)  # (combos, classes or 2 classes, doppler, columns)
@@ -416,9 +397,8 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
         # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
         # behind on all rows is not chosen by a resample of them; each redraws the measured and the synthetic rows
         contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
-        rows = [(row_features(finish_rows(simulated[made_by[i]][0], {k: v for k, v in combos[i].items()
-                                                                     if k not in motions}, seed, processing), objective),
-                 simulated[made_by[i]][1]) for i in contenders]
+        rows = [(finish_rows(simulated[made_by[i]][0], {k: v for k, v in combos[i].items() if k not in motions}, seed,
+                             processing), simulated[made_by[i]][1]) for i in contenders]
         y = rows[0][1]
         if any(not np.array_equal(y, other) for _, other in rows):
             raise ValueError("the candidates' synthetic rows differ in their labels: simulate must draw the same rows")
@@ -441,7 +421,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                 made = simulate({**{k: values[k] for k in radar_keys}, **{k: values[k] for k in motions}, name: v})
                 if made is None:
                     continue
-                x = row_features(finish_rows(made[0], values, seed, processing), objective)
+                x = finish_rows(made[0], values, seed, processing)
                 # a shift clipped at 0 makes the same draws: one candidate
                 if not any(np.array_equal(x, earlier) for earlier, _ in made_rows):
                     tried.append(v)
