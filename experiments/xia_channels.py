@@ -7,7 +7,10 @@ time, HATI: horizontal angle x time; the DTI's folders with DTI replaced by the 
 centroid (intensity-weighted mean row) at a few columns: a sweep across the beam moves the centroid of an
 angle channel and leaves the range flat; a push or pull moves the range. Then each row's cycles: the number of
 periods over its columns at which the spectrum of its centroid series peaks (1-8), counted over the class's rows: a
-circle turning n times moves the range and the angles n times. Needs the whole mirror
+circle turning n times moves the range and the angles n times. Then how far each row's hand sweeps across the beam:
+the change of its angle images' brightest row from the first columns to the last, in sin(angle) under TI's angle-FFT
+convention (N bins span sin(angle) from -1 to 1, 2 / N a bin): a sweep of chord c at distance d changes it by about
+c / d. Needs the whole mirror
 (``handradar-fetch dataset=xia2021``: every channel), not the DTI-only copy. Writes nothing.
 """
 
@@ -26,6 +29,7 @@ from handradar.provenance import REPO_ROOT
 CHANNELS = ("VATI", "RTI", "HATI")
 ZERO_BAND = 3  # rows either side of zero Doppler left out of the sides' energy (the band a trembling hand leaves)
 COLUMNS = (10, 20, 28, 36, 44, 54)
+SWEEP_ENDS = ((4, 16), (48, 60))  # the columns before and after the gesture (the rows centre it on column ~31)
 
 
 def row_centroids(image: np.ndarray, columns: tuple[int, ...] = COLUMNS) -> list[float]:
@@ -42,6 +46,14 @@ def dominant_cycles(images: np.ndarray, most: int = 8) -> np.ndarray:
     c = (rows * images).sum(axis=1) / np.maximum(images.sum(axis=1), 1e-12)
     spectrum = np.abs(np.fft.rfft(c - c.mean(axis=1, keepdims=True), axis=1))
     return np.argmax(spectrum[:, 1:most + 1], axis=1) + 1
+
+
+def angle_sweep(images: np.ndarray, ends: tuple[tuple[int, int], ...] = SWEEP_ENDS) -> np.ndarray:
+    """Per angle image of (n, bins, columns): the median brightest bin over the last ``ends`` columns less that over
+    the first, in sin(angle) (TI's angle FFT: the bins span sin(angle) from -1 to 1, 2 / bins a bin)."""
+    peak = images.argmax(axis=1).astype(np.float64)
+    (a0, a1), (b0, b1) = ends
+    return (np.median(peak[:, b0:b1], axis=1) - np.median(peak[:, a0:a1], axis=1)) * 2.0 / images.shape[1]
 
 
 def low_side_share(dti: np.ndarray, zero_row: int, band: int = ZERO_BAND) -> float:
@@ -102,6 +114,13 @@ def main(argv: list[str]) -> int:
             top = np.argsort(counts)[::-1][:2]
             cells.append(", ".join(f"{k} ({counts[k] / counts.sum():.0%})" for k in top if counts[k]))
         print(f"| {cls} | " + " | ".join(cells) + " |")
+    print("\nangle sweep of each row (sin(angle), TI's convention): median |change| and its quartiles")
+    print("| class | " + " | ".join(ch for ch in CHANNELS if ch != "RTI") + " |")
+    print("|---|" + "---|" * (len(CHANNELS) - 1))
+    for cls, images in rows.items():
+        sweeps = [np.abs(angle_sweep(images[ch])) for ch in CHANNELS if ch != "RTI"]
+        print(f"| {cls} | " + " | ".join(f"{np.median(a):.2f} ({np.percentile(a, 25):.2f}-{np.percentile(a, 75):.2f})"
+                                          for a in sweeps) + " |")
     m = read_manifest(args.manifest, args.root)
     zero = int(round(m.zero_doppler if m.zero_doppler is not None else rows[next(iter(rows))]["DTI"].shape[1] // 2))
     print(f"\nshare of each class-mean DTI's energy on its low rows (more than {ZERO_BAND} rows from zero Doppler, row {zero})")

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 import yaml
 
-from experiments.xia_channels import CHANNELS, channel_means, dominant_cycles, low_side_share, main, row_centroids
+from experiments.xia_channels import (
+    CHANNELS,
+    angle_sweep,
+    channel_means,
+    dominant_cycles,
+    low_side_share,
+    main,
+    row_centroids,
+)
 
 
 def test_row_centroid_closed_form():
@@ -24,6 +32,15 @@ def test_dominant_cycles_closed_form():
         images[i, np.round(20 + 8 * np.sin(2 * np.pi * n * cols / 64)).astype(int), cols] = 1.0
     images[3, 30 - cols // 4, cols] = 1.0
     assert dominant_cycles(images).tolist() == [1, 2, 3, 1]
+
+
+def test_angle_sweep_closed_form():
+    """A blob on bin 40 of 64 up to column 20, then on bin 24: sin(angle) falls by 16 bins of 2 / 64, 0.5; a still one
+    does not move."""
+    images = np.zeros((2, 64, 64))
+    images[0, 40, :20], images[0, 24, 20:] = 1.0, 1.0
+    images[1, 33, :] = 1.0
+    assert angle_sweep(images).tolist() == [-0.5, 0.0]
 
 
 def test_low_side_share_closed_form():
