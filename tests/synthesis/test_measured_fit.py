@@ -14,6 +14,7 @@ import yaml
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import Manifest, MeasuredDataset, dataset_chain, measured_manifest
 from handradar.data.unknowns import MOTION, UNKNOWNS
+from handradar.gap.unpaired import unpaired_gap
 from handradar.hand.motions import DEFAULT_RANGES
 from handradar.radar.chain import ChainConfig, power_to_unit
 from handradar.synthesis.measured import (
@@ -24,6 +25,7 @@ from handradar.synthesis.measured import (
     mirror_doppler,
     motion_ranges,
     UnknownsFit,
+    step_rows,
     synthesize_measured,
 )
 
@@ -245,6 +247,26 @@ def test_stated_steps_reach_the_synthetic_rows(tmp_path):
     assert x.shape[1:] == (32, 16)
     assert (x == 0).mean() > 0.5 and not ((x > 0) & (x < 0.2)).any() and x.max() == 1.0
 
+
+
+def test_the_report_names_a_misstated_clutter_filter(tmp_path):
+    """Stand-in rows made without clutter removal (the hand's zero-Doppler line in every column) under a manifest that
+    states each frame's removal: of every step switched on alone, the one simulated anew without it brings each
+    class's synthetic mean closest to the measured one; a step the chain already takes is not offered."""
+    measured_stand_in(tmp_path, n=16, processing={"clutter_removal": "none"})
+    manifest = yaml.safe_load((tmp_path / "m.yaml").read_text())
+    (tmp_path / "stated.yaml").write_text(yaml.safe_dump({**manifest, "processing": {"clutter_removal": "frame"}}))
+    real_path = MeasuredDataset(tmp_path / "stated.yaml", tmp_path / "cache").path()
+    real = load_arrays(real_path)
+    rows = (real.meta["split"] == "train") & (real.x.max(axis=(1, 2)) > 0)
+    made = dict(per_class=16, seed=0, cache_dir=tmp_path / "synth")
+    synth = load_arrays(synthesize_measured(real_path, TRUTH, **made))
+    steps = step_rows(real_path, TRUTH, **made)
+    assert {"no clutter removal", "MTI canceller (lag 1)", "strongest range bin", "linear power"} <= set(steps)
+    assert "clutter removal per frame" not in steps and "sum over the range gate" not in steps
+    assert all(x.shape == synth.x.shape for x in steps.values())
+    report = unpaired_gap(real.x[rows], real.y[rows], synth.x, synth.y, list(CLASSES), steps)
+    assert {c: e["explained_by"] for c, e in report["classes"].items()} == dict.fromkeys(CLASSES, "no clutter removal")
 
 def test_a_hand_held_in_view_returns_in_nearly_every_column(tmp_path):
     """The motions hold the hand in the beam before and after the gesture; with the physiological tremor a dataset's

@@ -7,7 +7,7 @@ measured rows (Cohen's d: the difference of means over the pooled standard devia
 class-mean and class-spread images' 1 - SSIM (the unpaired fit's objective, handradar.synthesis.measured). Large
 |d| names what the simulator gets wrong: its Doppler spread, the weight of the zero-Doppler band, how long the
 gesture lasts, ... Given the synthetic rows with one processing step switched on alone (``alternatives``:
-handradar.synthesis.measured.one_step_rows), it names per class the step that explains most of the difference:
+handradar.synthesis.measured.step_rows), it names per class the step that explains most of the difference:
 the one whose class mean lies closest to the measured one, where it is closer than the fitted chain's.
 """
 

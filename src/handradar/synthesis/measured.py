@@ -42,6 +42,7 @@ import numpy as np
 import torch
 
 from handradar.atomic import atomic_path
+from handradar.data.datasets import load_arrays
 from handradar.data.measured import PROCESSING, RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
 from handradar.data.unknowns import MOTION, UNKNOWN, UNKNOWNS
 from handradar.hand.motions import DEFAULT_RANGES, library_key
@@ -123,6 +124,16 @@ ONE_STEP: dict[str, dict] = {  # steps the unpaired gap report switches on alone
 }
 
 
+SIMULATED_STEPS: dict[str, dict] = {  # steps that need a simulation of their own: processing.<key> over the manifest's
+    "no clutter removal": {"clutter_removal": "none"},
+    "clutter removal per image": {"clutter_removal": "window"},
+    "clutter removal per frame": {"clutter_removal": "frame"},
+    "MTI canceller (lag 1)": {"clutter_removal": "mti", "mti_lag": 1},
+    "strongest range bin": {"range": "strongest"},
+    "sum over the range gate": {"range": "sum"},
+}
+
+
 def one_step_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed: int,
                   chain: ChainConfig) -> dict[str, np.ndarray]:
     """Rows as simulated (``DEEP_FLOOR_DB``) finished by the fitted chain with each step of :data:`ONE_STEP` switched
@@ -134,6 +145,22 @@ def one_step_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed:
         changed = replace(fitted, **step)
         if changed != fitted:
             out[name] = finish_rows(x, rest, seed, changed)
+    return out
+
+
+def step_rows(real_path: str | Path, values: Mapping[str, float | str | None], *, per_class: int, seed: int,
+              cache_dir: str | Path, sim: Mapping | None = None) -> dict[str, np.ndarray]:
+    """The synthetic rows of :func:`synthesize_measured` (the same draws, in its order) with each step of
+    :data:`ONE_STEP` (finished from the same simulation) or :data:`SIMULATED_STEPS` (simulated anew: a clutter filter,
+    a range handling) switched on alone over the fitted chain, by step name; a step the chain already takes is left
+    out. What the unpaired gap report compares with the measured rows."""
+    m, shape = measured_manifest(real_path)
+    made = dict(per_class=per_class, seed=seed, cache_dir=cache_dir, sim=sim)
+    chain = dataset_chain(m, shape, values=values)
+    out = one_step_rows(load_arrays(synthesize_measured(real_path, values, **made, finish=False)).x, values, seed, chain)
+    for name, step in SIMULATED_STEPS.items():
+        if dataset_chain(replace(m, processing={**m.processing, **step}), shape, values=values) != chain:
+            out[name] = load_arrays(synthesize_measured(real_path, values, **made, processing=step)).x
     return out
 
 
@@ -203,13 +230,17 @@ def motion_source(m: Manifest, per_class: int, seed: int, duration_s: float,
 
 
 def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str | None], *, per_class: int, seed: int,
-                        cache_dir: str | Path, sim: Mapping | None = None, finish: bool = True) -> Path:
+                        cache_dir: str | Path, sim: Mapping | None = None, finish: bool = True,
+                        processing: Mapping | None = None) -> Path:
     """Synthetic rows of a measured dataset's classes, cached by everything that makes them. ``values`` holds the
     manifest's unknowns (handradar.data.unknowns): the radar ones set the radar (:func:`synthesis_radar`) and its
     range handling, the motion ones the motions' draw ranges (:func:`motion_ranges`), the others finish the rows
     simulated at a deep floor (:func:`finish_rows`) with the dataset's processing; ``finish`` False: the rows as
-    simulated (what the fit finishes candidate by candidate)."""
+    simulated (what the fit finishes candidate by candidate). ``processing``: steps over the manifest's (its
+    ``processing.<key>``), as :func:`step_rows` switches them on."""
     m, shape = measured_manifest(real_path)
+    if processing:
+        m = replace(m, processing={**m.processing, **processing})
     radar = synthesis_radar(m, shape, values)
     chain = dataset_chain(m, shape, radar.n_loops, values)
     source = motion_source(m, per_class, seed, shape[1] * radar.frame_period_s, values)

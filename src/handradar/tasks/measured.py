@@ -62,7 +62,7 @@ from handradar.synthesis.measured import (
     UnknownsFit,
     fit_unknowns,
     motion_ranges,
-    one_step_rows,
+    step_rows,
     synthesize_measured,
 )
 from handradar.tasks.classify import evaluate, recompute_bn_stats
@@ -250,9 +250,7 @@ def synthetic_rows(job: Job, setup: MeasuredSetup, rows: MeasuredRows) -> Path:
     if not np.array_equal(np.unique(synth.y), np.arange(len(real.classes))):
         raise FormatError(path, "synthetic rows do not cover every class of the dataset")
     if job.rank_zero:  # where synthetic differs from the measured rows, and which step explains it (chooses nothing)
-        m, shape = measured_manifest(real.path)
-        simulated = load_arrays(synthesize_measured(real.path, values, **made, finish=False)).x
-        steps = one_step_rows(simulated, values, job.seed, dataset_chain(m, shape, values=values))
+        steps = step_rows(real.path, values, **made)
         for f in write_unpaired_gap(real.x[rows.pool], real.y[rows.pool], synth.x, synth.y, real.classes, job.run_dir,
                                     steps, approaching=str(values.get("approaching") or "high")):
             job.tracker.log_artifact(f, "unpaired_gap")
