@@ -160,6 +160,7 @@ def step_rows(real_path: str | Path, values: Mapping[str, float | str | None], *
     out = one_step_rows(load_arrays(synthesize_measured(real_path, values, **made, finish=False)).x, values, seed, chain)
     for name, step in SIMULATED_STEPS.items():
         if dataset_chain(replace(m, processing={**m.processing, **step}), shape, values=values) != chain:
+            log.info("the unpaired gap report's step %r: its own simulation (cached)", name)
             out[name] = load_arrays(synthesize_measured(real_path, values, **made, processing=step)).x
     return out
 
