@@ -21,9 +21,9 @@ The loop period (v_max), the time per column and the chirps a frame (zero-padded
 bins: fewer chirps widen every Doppler line) need a simulation each, as does each candidate of the motions'
 shared draws (speed, tremor, angle, distance, hand size: :func:`motion_ranges`), searched one at a time after them
 (and the radar again where they moved). The uncertainty is a bootstrap over the measured rows and the synthetic
-ones (classes resampled within themselves): the share of resamples that choose each candidate value, and the 2.5-97.5 % range of the
-chosen values. A numeric value chosen at the edge of its grid is reported as such (:func:`grid_edges`), with how to
-widen the grid.
+ones (classes resampled within themselves): the share of resamples that choose each candidate value, and the
+2.5-97.5 % range of the chosen values. A numeric value chosen at the edge of its grid is reported as such
+(:func:`grid_edges`), with how to widen the grid.
 """
 
 from __future__ import annotations
@@ -157,7 +157,8 @@ def step_rows(real_path: str | Path, values: Mapping[str, float | str | None], *
     m, shape = measured_manifest(real_path)
     made = dict(per_class=per_class, seed=seed, cache_dir=cache_dir, sim=sim)
     chain = dataset_chain(m, shape, values=values)
-    out = one_step_rows(load_arrays(synthesize_measured(real_path, values, **made, finish=False)).x, values, seed, chain)
+    simulated = load_arrays(synthesize_measured(real_path, values, **made, finish=False)).x
+    out = one_step_rows(simulated, values, seed, chain)
     for name, step in SIMULATED_STEPS.items():
         if dataset_chain(replace(m, processing={**m.processing, **step}), shape, values=values) != chain:
             log.info("the unpaired gap report's step %r: its own simulation (cached)", name)
@@ -359,10 +360,10 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     again: at most ``passes`` rounds of the motions' search. The bootstrap re-ranks the ``boot_candidates`` best
     combinations, and each motion unknown's candidates; it is skipped (``n_boot`` 0 in the result: no uncertainty)
     where a class has fewer than 2 rows, whose every resample is the same rows; each resample redraws the
-    candidates' synthetic rows too (the same rows for every candidate). A motion unknown leaves its prior only for a candidate that beats it in
-    ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result names those held back): a move the rows cannot
-    tell from the synthetic rows' own sampling is not made (docs/datasets.md#fitting-the-motions). ``objective``:
-    :data:`OBJECTIVES`.
+    candidates' synthetic rows too (the same rows for every candidate). A motion unknown leaves its prior only for a
+    candidate that beats it in ``PRIOR_KEPT_BELOW`` of the resamples (``kept`` in the result names those held back):
+    a move the rows cannot tell from the synthetic rows' own sampling is not made
+    (docs/datasets.md#fitting-the-motions). ``objective``: :data:`OBJECTIVES`.
     """
     optional = {"chirps_per_frame": [None], "noise_db": [None], "noise_looks": [1]}
     if passes < 1:
@@ -463,8 +464,6 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
             gaps = objectives(real_moments, np.stack([class_moments(x, y, n_classes, objective) for x, y in made_rows]))
             best = int(np.argmin(gaps))
             candidates += [{**values, name: v, "gap": float(gap)} for v, gap in zip(tried, gaps)]
-            # each resample redraws the measured rows and, the same for every candidate (their draws are shared), the
-            # synthetic rows: a motion's candidates lie close, and the synthetic rows' own sampling moves their ranking
             y = made_rows[0][1]
             boot = np.zeros((len(resamples), len(tried)))
             for i, (real_r, pick) in enumerate(zip(resamples, redraws(y))):
