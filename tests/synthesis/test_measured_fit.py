@@ -14,6 +14,7 @@ import yaml
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import Manifest, MeasuredDataset, dataset_chain, measured_manifest
 from handradar.data.unknowns import MOTION, UNKNOWNS
+from handradar.errors import FormatError
 from handradar.gap.unpaired import unpaired_gap
 from handradar.hand.motions import DEFAULT_RANGES
 from handradar.radar.chain import ChainConfig, power_to_unit
@@ -267,6 +268,23 @@ def test_the_report_names_a_misstated_clutter_filter(tmp_path):
     assert all(x.shape == synth.x.shape for x in steps.values())
     report = unpaired_gap(real.x[rows], real.y[rows], synth.x, synth.y, list(CLASSES), steps)
     assert {c: e["explained_by"] for c, e in report["classes"].items()} == dict.fromkeys(CLASSES, "no clutter removal")
+
+
+def test_hands_drawn_beyond_the_range_gate_are_an_error(tmp_path):
+    """A manifest drawing one class's hands 0.5-0.9 m away under the default 0.08-0.70 m range gate: synthesis names
+    the manifest, the range and the gate instead of simulating hands the chain cuts; a wider gate takes them."""
+    measured_stand_in(tmp_path)
+    manifest = yaml.safe_load((tmp_path / "m.yaml").read_text())
+    far = {**manifest, "classes": {**CLASSES, "pull": {"motions": ["pull"], "ranges": {"distance_m": [0.5, 0.9]}}}}
+
+    def synthesize(name: str, **fields) -> Path:
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({**far, **fields}))
+        real_path = MeasuredDataset(tmp_path / f"{name}.yaml", tmp_path / "cache").path()
+        return synthesize_measured(real_path, TRUTH, per_class=2, seed=0, cache_dir=tmp_path / "synth")
+
+    with pytest.raises(FormatError, match=r"manifest 'known' draws the hands 0.2-0.9 m from the radar.*range_gate_m \[0.08, 0.7\]"):
+        synthesize("far")
+    assert load_arrays(synthesize("wide", processing={"range_gate_m": [0.08, 1.0]})).x.shape[0] == 6
 
 def test_a_hand_held_in_view_returns_in_nearly_every_column(tmp_path):
     """The motions hold the hand in the beam before and after the gesture; with the physiological tremor a dataset's

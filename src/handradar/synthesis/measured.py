@@ -45,6 +45,7 @@ from handradar.atomic import atomic_path
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import PROCESSING, RADAR_FIELDS, Manifest, dataset_chain, measured_manifest
 from handradar.data.unknowns import MOTION, UNKNOWN, UNKNOWNS
+from handradar.errors import FormatError
 from handradar.hand.motions import DEFAULT_RANGES, library_key
 from handradar.metrics import per_example_ssim
 from handradar.provenance import config_hash
@@ -246,6 +247,14 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     radar = synthesis_radar(m, shape, values)
     chain = dataset_chain(m, shape, radar.n_loops, values)
     source = motion_source(m, per_class, seed, shape[1] * radar.frame_period_s, values)
+    spans = [source["ranges"].get("distance_m", DEFAULT_RANGES["distance_m"]),
+             *(r["distance_m"] for r in source["class_ranges"].values() if "distance_m" in r)]
+    near, far = min(lo for lo, _ in spans), max(hi for _, hi in spans)
+    if near < chain.gate_m[0] or far > chain.gate_m[1]:  # a hand outside the gate would be cut without a word
+        raise FormatError(m.path, f"manifest {m.name!r} draws the hands {near:g}-{far:g} m from the radar "
+                                  f"(motion_ranges.distance_m, moved by the fit where it moves them), outside "
+                                  f"processing.range_gate_m "
+                                  f"[{chain.gate_m[0]:g}, {chain.gate_m[1]:g}]: widen the gate or narrow the range")
     simulated = simulation_chain(chain)
     # measured/2: rendered by Simulator.render_rows (no float16 slot-profile cache in between)
     key = config_hash(source, radar, simulated, dict(sim or {}), 'measured/2', library_key())
