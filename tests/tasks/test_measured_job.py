@@ -51,6 +51,17 @@ def test_measured_job(tmp_path):
     assert len(list((tmp_path / "cache" / "synth").glob("measured-synth-*-classifier-*.pt"))) == 1
 
 
+def test_no_variant_is_the_report_alone(tmp_path):
+    """variants=[]: the fit, the synthetic rows and the unpaired gap report, no classifier trained."""
+    measured_stand_in(tmp_path / "data")
+    cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", "split.per_class=0", "variants=[]"))
+    run_dir = run(cfg, tmp_path / "run")
+    assert json.loads((run_dir / "metrics.json").read_text()) == {}
+    assert set(json.loads((run_dir / "unpaired_gap.json").read_text())["classes"]) == {"push", "pull", "swipe"}
+    assert not list((tmp_path / "cache" / "synth").glob("*classifier*")) and not (run_dir / "figures" / "confusion_"
+                                                                                  "radar_only_val.png").exists()
+
+
 def test_unknown_variant_is_one_line(tmp_path):
     measured_stand_in(tmp_path / "data")
     cfg = compose_train(overrides(tmp_path, tmp_path / "data" / "m.yaml", "variants=[cgan]"))

@@ -126,8 +126,9 @@ class MeasuredSetup:
 
     @property
     def synthetic(self) -> bool:
-        """Whether any variant needs the synthetic rows."""
-        return any(v != "radar_only" for v in self.variants)
+        """Whether any variant needs the synthetic rows, or none runs (``variants=[]``: the fit, the synthetic rows
+        and the unpaired gap report alone, a quick look while setting a manifest's ranges)."""
+        return not self.variants or any(v != "radar_only" for v in self.variants)
 
 
 @dataclass(frozen=True)
@@ -321,6 +322,9 @@ def run_measured(job: Job) -> dict[str, float]:
                             "measured.tests": ",".join(rows.tests),
                             **{f"budget.{v}.{k}": n for v, b in budget.items() for k, n in b.items()}})
     synthetic = synthetic_rows(job, setup, rows) if setup.synthetic else None
+    if not setup.variants:
+        log.info("no variant to train: the fit, the synthetic rows and the unpaired gap report alone (%s)",
+                 job.run_dir / "unpaired_gap.md")
     metrics = {}
     for name in setup.variants:
         result = job.cached(name, lambda name=name: {"scores": score(job, train_variant(job, name, setup, rows, synthetic),
