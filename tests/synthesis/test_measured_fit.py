@@ -249,7 +249,6 @@ def test_stated_steps_reach_the_synthetic_rows(tmp_path):
     assert (x == 0).mean() > 0.5 and not ((x > 0) & (x < 0.2)).any() and x.max() == 1.0
 
 
-
 def test_the_report_names_a_misstated_clutter_filter(tmp_path):
     """Stand-in rows made without clutter removal (the hand's zero-Doppler line in every column) under a manifest that
     states each frame's removal: of every step switched on alone, the one simulated anew without it brings each
@@ -282,9 +281,11 @@ def test_hands_drawn_beyond_the_range_gate_are_an_error(tmp_path):
         real_path = MeasuredDataset(tmp_path / f"{name}.yaml", tmp_path / "cache").path()
         return synthesize_measured(real_path, TRUTH, per_class=2, seed=0, cache_dir=tmp_path / "synth")
 
-    with pytest.raises(FormatError, match=r"manifest 'known' draws the hands 0.2-0.9 m from the radar.*range_gate_m \[0.08, 0.7\]"):
+    message = r"manifest 'known' draws the hands 0.2-0.9 m from the radar.*range_gate_m \[0.08, 0.7\]"
+    with pytest.raises(FormatError, match=message):
         synthesize("far")
     assert load_arrays(synthesize("wide", processing={"range_gate_m": [0.08, 1.0]})).x.shape[0] == 6
+
 
 def test_a_hand_held_in_view_returns_in_nearly_every_column(tmp_path):
     """The motions hold the hand in the beam before and after the gesture; with the physiological tremor a dataset's
@@ -327,7 +328,6 @@ def test_one_row_per_class_has_no_bootstrap_uncertainty():
     assert UnknownsFit.from_dict(fit.as_dict()) == fit
     two = fit_unknowns(np.concatenate([real_x, real_x]), np.array([0, 1, 0, 1]), 2, simulate, grid, n_boot=30, seed=0)
     assert two.n_boot == 30 and "chosen by 100% of resamples" in two.summary()
-
 
 
 def test_the_radars_resamples_redraw_the_synthetic_rows():

@@ -411,7 +411,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
     def radar_stage(motion_values: dict) -> tuple[dict, dict, list[dict]]:
         """Every combination of the radar and finish unknowns at ``motion_values``: the best, each resample's
         choices by unknown, and every candidate with its objective."""
-        combos, synth_moments, simulated, made_by = [], [], [], []
+        combos, synth_moments, made_from = [], [], []  # made_from: each combo's simulated rows and finish values
         for radar_values in itertools.product(*(g[k] for k in radar_keys)):
             radar = {k: (v if v is None or not UNKNOWNS[k].numeric else int(v) if UNKNOWNS[k].kind == "count"
                          else float(v)) for k, v in zip(radar_keys, radar_values)}
@@ -419,7 +419,6 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
             if made is None:
                 continue
             x, y = made
-            simulated.append((x, np.asarray(y)))
             for rest in itertools.product(*(g[k] for k in finished)):
                 values = {**radar, **dict(zip(finished, rest))}
                 if values.get("noise_db") is None and values.get("noise_looks", 1) != g.get("noise_looks", [1])[0]:
@@ -430,7 +429,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
                 values = {k: (int(v) if k == "noise_looks" else float(v) if isinstance(v, (int, float)) else v)
                           for k, v in values.items()}
                 combos.append({**values, **motion_values})
-                made_by.append(len(simulated) - 1)
+                made_from.append((x, np.asarray(y), values))
                 synth_moments.append(class_moments(finish_rows(x, values, seed, processing), y, n_classes, objective))
         if not combos:
             raise ValueError("no candidate of the grid could be simulated")
@@ -439,8 +438,7 @@ def fit_unknowns(real_x: np.ndarray, real_y: np.ndarray, n_classes: int,
         # the resamples re-rank the best candidates only: SSIM costs ~9 ms a pair on one core, and a candidate far
         # behind on all rows is not chosen by a resample of them; each redraws the measured and the synthetic rows
         contenders = np.argsort(gaps, kind="stable")[:boot_candidates]
-        rows = [(finish_rows(simulated[made_by[i]][0], {k: v for k, v in combos[i].items() if k not in motions}, seed,
-                             processing), simulated[made_by[i]][1]) for i in contenders]
+        rows = [(finish_rows(x, values, seed, processing), y) for x, y, values in (made_from[i] for i in contenders)]
         y = rows[0][1]
         if any(not np.array_equal(y, other) for _, other in rows):
             raise ValueError("the candidates' synthetic rows differ in their labels: simulate must draw the same rows")
