@@ -231,6 +231,33 @@ def test_interpolation_paths_agree():
     assert float(g) == pytest.approx(float(slope), rel=1e-9)
 
 
+def test_interpolated_distance_is_the_norm_of_the_interpolated_point():
+    """lerp_norm: |x(t)| of the linearly interpolated point, against the norm of lerp's (B, M, K, 3) result (shared
+    and per-row times, clamped ends included), with its gradients in the positions and in the fractions."""
+    from handradar.sim.interp import interp_weights, lerp, lerp_norm
+
+    gen = torch.Generator().manual_seed(4)
+    t = torch.arange(20, dtype=torch.float64) / 100
+    new = torch.linspace(-0.01, 0.2, 57, dtype=torch.float64)
+    x = (torch.randn(3, 20, 5, 3, generator=gen, dtype=torch.float64) * 0.05 + torch.tensor([0.0, 0.0, 0.3],
+         dtype=torch.float64)).requires_grad_(True)
+    lo, frac = interp_weights(t, new)
+    frac = frac.clone().requires_grad_(True)
+    want = lerp(x, lo, frac).norm(dim=-1)
+    got = lerp_norm(x, lo, frac)
+    torch.testing.assert_close(got, want, atol=1e-12, rtol=0)
+    torch.testing.assert_close(lerp_norm(x, lo.expand(3, -1), frac.expand(3, -1)), want, atol=1e-12, rtol=0)
+    w = torch.randn(want.shape, generator=gen, dtype=torch.float64)
+    grads_want = torch.autograd.grad((want * w).sum(), (x, frac))
+    grads_got = torch.autograd.grad((got * w).sum(), (x, frac))
+    for g, h in zip(grads_got, grads_want):
+        torch.testing.assert_close(g, h, atol=1e-10, rtol=0)
+    # a point crossing the origin's neighbourhood between two steps: the distance dips below both ends
+    line = torch.tensor([[[[-0.1, 0.01, 0.0]], [[0.1, 0.01, 0.0]]]], dtype=torch.float64)
+    mid = lerp_norm(line, torch.tensor([0]), torch.tensor([0.5], dtype=torch.float64))
+    assert float(mid) == pytest.approx(0.01, abs=1e-12)
+
+
 @pytest.mark.slow
 def test_compiled_weighted_sum_equals_eager(radar, short_chain):
     times = _steps(radar, short_chain)

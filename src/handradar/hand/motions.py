@@ -135,9 +135,10 @@ def bump(tau: np.ndarray) -> np.ndarray:
 def _rotate(points: np.ndarray, pivot: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """Rodrigues rotation of points (T, k, 3) about ``axis`` through ``pivot`` by ``angle`` (T,) radians."""
     a = axis / np.linalg.norm(axis)
-    p = points - pivot
+    skew = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])  # skew @ v = a x v
     c, s = np.cos(angle)[:, None, None], np.sin(angle)[:, None, None]
-    return pivot + p * c + np.cross(a, p) * s + a * (p @ a)[..., None] * (1 - c)
+    rot = c * np.eye(3) + s * skew + (1 - c) * np.outer(a, a)  # (T, 3, 3): Rodrigues' matrix at each step
+    return pivot + (points - pivot) @ rot.transpose(0, 2, 1)
 
 
 def _flex_index(joints: np.ndarray, angle: np.ndarray) -> np.ndarray:

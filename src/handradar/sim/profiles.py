@@ -34,7 +34,7 @@ import torch
 from handradar.radar.chain import ChainConfig, gate_bins, range_response
 from handradar.radar.config import SPEED_OF_LIGHT_M_S, RadarConfig
 from handradar.radar.signal import carrier_phase_rad
-from handradar.sim.interp import interp_weights, lerp
+from handradar.sim.interp import interp_weights, lerp, lerp_norm
 from handradar.sim.scatterers import N_SLOTS, Scatterers, radar_amplitude
 
 N_ALL_SLOTS = N_SLOTS + 1  # 38 weighted bone slots + 1 unweighted slot (index 38)
@@ -62,21 +62,22 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     r_tx, r_rx = scat.tx.norm(dim=-1), scat.rx.norm(dim=-1)  # (B, T, K) at the skeleton steps
     amp = radar_amplitude(scat.rcs_m2, r_tx, r_rx, radar.wavelength_m, tx_power_w, gain_tx_dbi,
                           gain_rx_dbi) * scat.gain
+    tx, rx = scat.tx, scat.rx
+    # points silent at every step of the batch (a hand untracked all window) are silent at every chirp
+    # and add exact zeros: they are left out before interpolating, unless autograd is recording (d/d
+    # amplitude is nonzero at amplitude 0 too, and a caller may backpropagate through an all-silent batch)
+    owner = torch.where(scat.owner < 0, torch.full_like(scat.owner, N_SLOTS), scat.owner)
+    if not (torch.is_grad_enabled() and (amp.requires_grad or frac.requires_grad)):  # amp carries tx's and rx's
+        live = torch.nonzero((amp != 0).flatten(0, 1).any(0)).flatten()
+        if live.numel() < scat.n_points:
+            amp, owner = amp[..., live], owner[live]
+            tx, rx = tx[:, :, live], (tx[:, :, live] if rx is tx else rx[:, :, live])
     # the chirps innermost, (B, K, M): the slots come out contiguous in the (B, 39, F, L, Ch, bins)
     # layout that combine_slots and the cache read without a copy
     amp_c = lerp(amp, lo, frac).transpose(1, 2).contiguous()
-    pos_tx = lerp(scat.tx, lo, frac).norm(dim=-1)
-    pos_rx = pos_tx if scat.rx is scat.tx else lerp(scat.rx, lo, frac).norm(dim=-1)  # direct paths: rx is tx
-    rng = (0.5 * (pos_tx + pos_rx)).transpose(1, 2).contiguous()  # (B, K, M)
-
-    # points silent at every chirp of the batch (a hand untracked all window) add exact zeros: their
-    # range response is skipped, unless autograd is recording (d/d amplitude is nonzero at amplitude
-    # 0 too, and a caller may backpropagate through an all-silent batch)
-    owner = torch.where(scat.owner < 0, torch.full_like(scat.owner, N_SLOTS), scat.owner)
-    if not (torch.is_grad_enabled() and (amp_c.requires_grad or rng.requires_grad)):
-        live = torch.nonzero((amp_c != 0).transpose(0, 1).flatten(1).any(1)).flatten()
-        if live.numel() < scat.n_points:
-            rng, amp_c, owner = rng[:, live], amp_c[:, live], owner[live]
+    pos_tx = lerp_norm(tx, lo, frac)
+    pos_rx = pos_tx if rx is tx else lerp_norm(rx, lo, frac)  # direct paths: rx is tx
+    rng = (pos_tx if rx is tx else 0.5 * (pos_tx + pos_rx)).transpose(1, 2).contiguous()  # (B, K, M)
 
     b0, b1 = gate_bins(radar, chain)
     bins = torch.arange(b0, b1, device=dev)
