@@ -75,9 +75,9 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     # the chirps innermost, (B, K, M): the slots come out contiguous in the (B, 39, F, L, Ch, bins)
     # layout that combine_slots and the cache read without a copy
     amp_c = lerp(amp, lo, frac).transpose(1, 2).contiguous()
-    pos_tx = lerp_norm(tx, lo, frac)
-    pos_rx = pos_tx if rx is tx else lerp_norm(rx, lo, frac)  # direct paths: rx is tx
-    rng = (pos_tx if rx is tx else 0.5 * (pos_tx + pos_rx)).transpose(1, 2).contiguous()  # (B, K, M)
+    rng = lerp_norm(tx, lo, frac)  # direct paths: rx is tx
+    rng = rng if rx is tx else 0.5 * (rng + lerp_norm(rx, lo, frac))
+    rng = rng.transpose(1, 2).contiguous()  # (B, K, M)
 
     b0, b1 = gate_bins(radar, chain)
     bins = torch.arange(b0, b1, device=dev)
