@@ -14,7 +14,6 @@ reports the fastest (runs of one build on the 2-core machine spread by up to 1.5
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import tempfile
 import time
@@ -27,7 +26,7 @@ from benchmarks.common import Result
 from handradar.data.datasets import load_arrays
 from handradar.data.measured import dataset_chain, read_manifest
 from handradar.provenance import REPO_ROOT
-from handradar.synthesis.measured import finish_rows, motion_source, simulation_chain, synthesis_radar
+from handradar.synthesis.measured import finish_rows, motion_source, simulation_chain, synthesis_radar, with_steps
 from handradar.synthesis.providers import synthesize_source
 
 REPEAT = 3  # runs of each set-up; the fastest is reported (the least disturbed by other load on a shared machine)
@@ -49,7 +48,7 @@ def run() -> list[Result]:
         shape = (64, 64)
         values = {"v_max_m_s": 2.0, "frame_period_s": 0.035, "chirps_per_frame": 64, "dynamic_range_db": 60.0}
         for name, steps in SETUPS.items():
-            m = dataclasses.replace(xia, processing={**xia.processing, **steps})
+            m = with_steps(xia, steps)
             radar = synthesis_radar(m, shape, values)
             chain = dataset_chain(m, shape, radar.n_loops, values)
             source = motion_source(m, per_class, 0, shape[1] * radar.frame_period_s)

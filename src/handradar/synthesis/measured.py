@@ -149,6 +149,11 @@ def one_step_rows(x: np.ndarray, values: Mapping[str, float | str | None], seed:
     return out
 
 
+def with_steps(m: Manifest, steps: Mapping) -> Manifest:
+    """``m`` with ``steps`` (processing.<key>: value) over its stated processing."""
+    return replace(m, processing={**m.processing, **steps}) if steps else m
+
+
 def step_rows(real_path: str | Path, values: Mapping[str, float | str | None], *, per_class: int, seed: int,
               cache_dir: str | Path, sim: Mapping | None = None) -> dict[str, np.ndarray]:
     """The synthetic rows of :func:`synthesize_measured` (the same draws, in its order) with each step of
@@ -161,7 +166,7 @@ def step_rows(real_path: str | Path, values: Mapping[str, float | str | None], *
     simulated = load_arrays(synthesize_measured(real_path, values, **made, finish=False)).x
     out = one_step_rows(simulated, values, seed, chain)
     for name, step in SIMULATED_STEPS.items():
-        if dataset_chain(replace(m, processing={**m.processing, **step}), shape, values=values) != chain:
+        if dataset_chain(with_steps(m, step), shape, values=values) != chain:
             log.info("the unpaired gap report's step %r: its own simulation (cached)", name)
             out[name] = load_arrays(synthesize_measured(real_path, values, **made, processing=step)).x
     return out
@@ -242,8 +247,7 @@ def synthesize_measured(real_path: str | Path, values: Mapping[str, float | str 
     simulated (what the fit finishes candidate by candidate). ``processing``: steps over the manifest's (its
     ``processing.<key>``), as :func:`step_rows` switches them on."""
     m, shape = measured_manifest(real_path)
-    if processing:
-        m = replace(m, processing={**m.processing, **processing})
+    m = with_steps(m, processing or {})
     radar = synthesis_radar(m, shape, values)
     chain = dataset_chain(m, shape, radar.n_loops, values)
     source = motion_source(m, per_class, seed, shape[1] * radar.frame_period_s, values)
