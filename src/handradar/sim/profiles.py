@@ -59,10 +59,11 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
     lo, frac = interp_weights(times.to(torch.float64), ct.reshape(-1))
     frac = frac.to(dtype)
 
-    r_tx, r_rx = scat.tx.norm(dim=-1), scat.rx.norm(dim=-1)  # (B, T, K) at the skeleton steps
-    amp = radar_amplitude(scat.rcs_m2, r_tx, r_rx, radar.wavelength_m, tx_power_w, gain_tx_dbi,
-                          gain_rx_dbi) * scat.gain
     tx, rx = scat.tx, scat.rx
+    direct = rx is tx  # direct paths: one distance serves both legs
+    r_tx = tx.norm(dim=-1)  # (B, T, K) at the skeleton steps
+    amp = radar_amplitude(scat.rcs_m2, r_tx, r_tx if direct else rx.norm(dim=-1), radar.wavelength_m, tx_power_w,
+                          gain_tx_dbi, gain_rx_dbi) * scat.gain
     # points silent at every step of the batch (a hand untracked all window) are silent at every chirp
     # and add exact zeros: they are left out before interpolating, unless autograd is recording (d/d
     # amplitude is nonzero at amplitude 0 too, and a caller may backpropagate through an all-silent batch)
@@ -71,12 +72,13 @@ def scatterer_profiles(scat: Scatterers, times: torch.Tensor, chirp_times: torch
         live = torch.nonzero((amp != 0).flatten(0, 1).any(0)).flatten()
         if live.numel() < scat.n_points:
             amp, owner = amp[..., live], owner[live]
-            tx, rx = tx[:, :, live], (tx[:, :, live] if rx is tx else rx[:, :, live])
+            tx = tx[:, :, live]
+            rx = tx if direct else rx[:, :, live]
     # the chirps innermost, (B, K, M): the slots come out contiguous in the (B, 39, F, L, Ch, bins)
     # layout that combine_slots and the cache read without a copy
     amp_c = lerp(amp, lo, frac).transpose(1, 2).contiguous()
-    rng = lerp_norm(tx, lo, frac)  # direct paths: rx is tx
-    rng = rng if rx is tx else 0.5 * (rng + lerp_norm(rx, lo, frac))
+    rng = lerp_norm(tx, lo, frac)
+    rng = rng if direct else 0.5 * (rng + lerp_norm(rx, lo, frac))
     rng = rng.transpose(1, 2).contiguous()  # (B, K, M)
 
     b0, b1 = gate_bins(radar, chain)
